@@ -1,0 +1,74 @@
+"""The result of one deployment simulation, sampled at s evenly spaced instants.
+
+A failed run is data, as in :func:`scipy.integrate.solve_ivp`: ``success`` is
+False, ``status``/``message`` say why, and the arrays hold the samples computed
+before the failure (``t`` may then be shorter than requested).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class SimulationResult:
+    """Sampled trajectory of a deployment.
+
+    Shapes: s samples, n coordinates (tree hinges), nb bodies.
+
+    Attributes
+    ----------
+    t : (s,) ndarray
+        Sample instants t_j, s, evenly spaced from 0 to t_end.
+    theta, omega : (s, n) ndarray
+        Hinge angles (rad) and rates (rad/s) of the tree coordinates.
+    rotation : (s, nb, 3, 3) ndarray
+        Body orientation in the ground frame (flat array frame).
+    position : (s, nb, 3) ndarray
+        Body centroid in the ground frame, m.
+    linear_velocity, angular_velocity : (s, nb, 3) ndarray
+        Centroid velocity (m/s) and angular velocity (rad/s), ground frame.
+    energy : dict of str -> (s,) ndarray
+        "kinetic", "spring" (hinge springs, contact and penalty springs),
+        "gravity" (potential, zero at the flat state), "dissipated" (work done
+        by all dampers since t = 0), in J.
+    constraint_gap : (s,) ndarray
+        Largest loop-closure gap |MM'|, |NN'| over the cut hinges, m (zeros
+        for a tree).
+    closure_sigma_min : (s, k) ndarray
+        The k smallest singular values of the loop-closure Jacobian (empty
+        second axis for a tree).
+    success : bool
+    status : int
+        0 reached t_end, -1 integration failure (step collapse, non-finite
+        state, constraint blow-up).
+    message : str
+    nfev, njev, nlu, nsteps : int
+        Right-hand-side and Jacobian evaluations, LU decompositions, steps.
+    wall_time : float
+        s.
+    method : str
+    """
+
+    t: np.ndarray
+    theta: np.ndarray
+    omega: np.ndarray
+    rotation: np.ndarray
+    position: np.ndarray
+    linear_velocity: np.ndarray
+    angular_velocity: np.ndarray
+    energy: dict
+    constraint_gap: np.ndarray
+    closure_sigma_min: np.ndarray
+    success: bool
+    status: int
+    message: str
+    nfev: int = 0
+    njev: int = 0
+    nlu: int = 0
+    nsteps: int = 0
+    wall_time: float = 0.0
+    method: str = ""
+    extra: dict = field(default_factory=dict)

@@ -1,0 +1,38 @@
+"""The one exception hierarchy of panel_deploy.
+
+Exceptions are for misuse (bad input, wrong call); a simulation or optimisation
+that runs but fails returns a result with ``success=False`` instead.
+"""
+
+
+class PanelDeployError(Exception):
+    """Base class of every error panel_deploy raises on purpose."""
+
+
+class SceneError(PanelDeployError, ValueError):
+    """A scene file or scene dictionary is invalid.
+
+    The message starts with the key path of the offending field, e.g.
+    ``simulation.rtol: expected a number > 0, got -1``.
+    """
+
+    def __init__(self, path, message):
+        self.path = path
+        self.reason = message
+        super().__init__(f"{path}: {message}" if path else message)
+
+
+class DesignError(PanelDeployError, ValueError):
+    """A fold design request cannot be met (no circuit, not packable, bad cells)."""
+
+
+class ModelError(PanelDeployError, ValueError):
+    """A model cannot be built or used as asked (bad body, hinge or index)."""
+
+
+class TrajectoryError(PanelDeployError, ValueError):
+    """A saved trajectory or recording is missing, corrupt or of the wrong shape."""
+
+
+class OptimisationError(PanelDeployError, ValueError):
+    """An optimisation request is invalid (bounds, groups, start point, cluster)."""

@@ -1,0 +1,391 @@
+"""Scene files: the one place the schema of a run is defined.
+
+A scene is a YAML mapping with the sections below; every key is optional
+except ``array`` and has the default shown. Units are SI. :func:`load_scene`
+validates everything and raises :class:`~panel_deploy.errors.SceneError`
+naming the key path (``simulation.rtol: expected a number > 0, got -1``).
+``panel-deploy schema`` prints this table.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .errors import SceneError
+
+INTEGRATORS = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA", "compiled")
+
+
+# --- field parsers: each takes (value, path) and returns the parsed value or raises ---
+
+def _type_name(v):
+    return type(v).__name__
+
+
+def number(low=None, high=None, low_open=False, allow_inf=False):
+    def parse(v, path):
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise SceneError(path, f"expected a number, got {_type_name(v)} {v!r}")
+        v = float(v)
+        if math.isnan(v) or (math.isinf(v) and not allow_inf):
+            raise SceneError(path, f"expected a finite number, got {v}")
+        if low is not None and (v <= low if low_open else v < low):
+            raise SceneError(path, f"expected a number {'>' if low_open else '>='} {low}, got {v:g}")
+        if high is not None and v > high:
+            raise SceneError(path, f"expected a number <= {high}, got {v:g}")
+        return v
+    parse.describe = "number" + (f" {'>' if low_open else '>='} {low}" if low is not None else "")
+    return parse
+
+
+def integer(low=None):
+    def parse(v, path):
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise SceneError(path, f"expected an integer, got {_type_name(v)} {v!r}")
+        if low is not None and v < low:
+            raise SceneError(path, f"expected an integer >= {low}, got {v}")
+        return v
+    parse.describe = "integer" + (f" >= {low}" if low is not None else "")
+    return parse
+
+
+def boolean(v, path):
+    if not isinstance(v, bool):
+        raise SceneError(path, f"expected true or false, got {_type_name(v)} {v!r}")
+    return v
+
+
+boolean.describe = "true/false"
+
+
+def choice(*options):
+    def parse(v, path):
+        if v not in options:
+            raise SceneError(path, f"expected one of {', '.join(map(str, options))}, got {v!r}")
+        return v
+    parse.describe = " | ".join(options)
+    return parse
+
+
+def vector3(v, path):
+    if not isinstance(v, (list, tuple)) or len(v) != 3:
+        raise SceneError(path, f"expected a list of 3 numbers, got {v!r}")
+    return tuple(number()(x, f"{path}[{i}]") for i, x in enumerate(v))
+
+
+vector3.describe = "[x, y, z]"
+
+
+def cell(v, path):
+    if (not isinstance(v, (list, tuple)) or len(v) != 2
+            or not all(isinstance(x, int) and not isinstance(x, bool) and x >= 1 for x in v)):
+        raise SceneError(path, f"expected a cell [row, col] of integers >= 1, got {v!r}")
+    return (v[0], v[1])
+
+
+cell.describe = "[row, col]"
+
+
+def cell_list(v, path):
+    if not isinstance(v, (list, tuple)):
+        raise SceneError(path, f"expected a list of cells [row, col], got {v!r}")
+    return tuple(cell(x, f"{path}[{i}]") for i, x in enumerate(v))
+
+
+def cell_pairs(v, path):
+    if not isinstance(v, (list, tuple)):
+        raise SceneError(path, f"expected a list of cell pairs [[r, c], [r, c]], got {v!r}")
+    out = []
+    for i, pair in enumerate(v):
+        if not isinstance(pair, (list, tuple)) or len(pair) != 2:
+            raise SceneError(f"{path}[{i}]", f"expected a pair of cells, got {pair!r}")
+        out.append(tuple(sorted(cell(c, f"{path}[{i}][{j}]") for j, c in enumerate(pair))))
+    return tuple(out)
+
+
+def one_of(*parsers, describe):
+    """First parser of ``parsers`` that accepts the value; else the last error."""
+    def parse(v, path):
+        err = None
+        for p in parsers:
+            try:
+                return p(v, path)
+            except SceneError as e:
+                err = e
+        raise SceneError(path, f"expected {describe}, got {v!r}") from err
+    parse.describe = describe
+    return parse
+
+
+def optional(parser):
+    def parse(v, path):
+        return None if v is None else parser(v, path)
+    parse.describe = f"{getattr(parser, 'describe', '')} or null"
+    return parse
+
+
+def hinge_stiffness_map(v, path):
+    if not isinstance(v, dict):
+        raise SceneError(path, f"expected a mapping hinge name -> stiffness, got {v!r}")
+    return {str(k): number(0.0)(x, f"{path}.{k}") for k, x in v.items()}
+
+
+hinge_stiffness_map.describe = "{hinge name: N m/rad}"
+
+
+def groups(v, path):
+    if v in ("auto", "none"):
+        return v
+    if not isinstance(v, list) or not all(isinstance(g, list) for g in v):
+        raise SceneError(path, f"expected auto, none or a list of lists of hinge names, got {v!r}")
+    for i, g in enumerate(v):
+        if not g:
+            raise SceneError(f"{path}[{i}]", "a group needs at least one hinge")
+    return tuple(tuple(str(h) for h in g) for g in v)
+
+
+groups.describe = "auto | none | [[hinge, ...], ...]"
+
+
+def spec(default, parse, unit="", doc=""):
+    return field(default=default, metadata={"parse": parse, "unit": unit, "doc": doc})
+
+
+# --- sections ---
+
+@dataclass(frozen=True)
+class ArraySection:
+    rows: int = spec(None, integer(1), "", "number of panel rows R")
+    cols: int = spec(None, integer(1), "", "number of panel columns C")
+    length: float = spec(None, number(0, low_open=True), "m", "panel length a, along x (columns)")
+    width: float = spec(None, number(0, low_open=True), "m", "panel width b, along y (rows)")
+    thickness: float = spec(None, number(0, low_open=True), "m", "panel thickness t")
+    mass: float = spec(None, optional(number(0, low_open=True)), "kg",
+                       "mass of one unit panel (give mass or density)")
+    density: float = spec(None, optional(number(0, low_open=True)), "kg/m^3",
+                          "panel density (give mass or density)")
+
+    @property
+    def unit_mass(self) -> float:
+        """Mass of one unit panel, kg."""
+        if self.mass is not None:
+            return self.mass
+        return self.density * self.length * self.width * self.thickness
+
+
+@dataclass(frozen=True)
+class FoldSection:
+    circuit: Any = spec(0, one_of(integer(0), cell_list, describe="a circuit index or a list of cells"),
+                        "", "Hamiltonian circuit: index in panel-deploy fold's order, or cells in order")
+    ground: Any = spec(None, optional(cell), "", "cell of the ground panel (default: first circuit cell)")
+    merge: Any = spec("auto", one_of(choice("auto", "none"), cell_pairs,
+                                     describe="auto, none or a list of cell pairs"),
+                      "", "merge side-by-side panels: auto, none, or the cell pairs to merge")
+
+
+@dataclass(frozen=True)
+class HingeSection:
+    stiffness: float = spec(0.1, number(0.0), "N m/rad", "k of every hinge unless overridden")
+    damping_ratio: float = spec(0.043, number(0.0), "s", "c/k (Rayleigh damping: c follows k)")
+    overrides: dict = spec(None, optional(hinge_stiffness_map), "N m/rad", "k of named hinges")
+    groups: Any = spec("auto", groups, "", "hinges sharing one stiffness: auto (mirror symmetry), none, or lists")
+
+
+@dataclass(frozen=True)
+class ContactSection:
+    k_s: float = spec(1000.0, number(0, low_open=True), "N m/rad", "joint-limit contact stiffness, Eq. (4)")
+    c_s: float = spec(0.5, number(0.0), "N m s/rad", "joint-limit contact damping, Eq. (4)")
+
+
+@dataclass(frozen=True)
+class ClosureSection:
+    method: str = spec("penalty", choice("penalty", "exact"), "",
+                       "penalty: the paper's Eq. (5) springs; exact: Lagrange multipliers")
+    cut_hinge: Any = spec(None, optional(one_of(cell_pairs, describe="a list of cell pairs")), "",
+                          "segments of the hinges to cut, one per loop (default: farthest from ground)")
+    k_M: float = spec(1.0e6, number(0, low_open=True), "N/m", "penalty stiffness at M (x, y, z)")
+    c_M: float = spec(280.0, number(0.0), "N s/m", "penalty damping at M")
+    k_N: float = spec(1.0e6, number(0, low_open=True), "N/m", "penalty stiffness at N (2 directions)")
+    c_N: float = spec(280.0, number(0.0), "N s/m", "penalty damping at N")
+    baumgarte: float = spec(1.0e-3, number(0, low_open=True), "s", "exact: constraint stabilisation time constant")
+    regularisation: float = spec(1.0e-10, number(0.0), "", "exact: relative Tikhonov term of the multiplier solve")
+
+
+@dataclass(frozen=True)
+class SimulationSection:
+    t_end: float = spec(1.0, number(0, low_open=True), "s", "end time")
+    method: str = spec("RK23", choice(*INTEGRATORS), "", "integrator (compiled: in-loop compiled RK)")
+    rtol: float = spec(1.0e-6, number(0, low_open=True), "", "relative tolerance")
+    atol: float = spec(1.0e-8, number(0, low_open=True), "", "absolute tolerance")
+    max_step: float = spec(math.inf, number(0, low_open=True, allow_inf=True), "s", "largest step")
+    samples: int = spec(301, integer(3), "", "number s of evenly spaced sample instants t_j")
+    events: bool = spec(True, boolean, "", "locate joint-limit contact switches as solver events")
+
+
+@dataclass(frozen=True)
+class CollisionSection:
+    tolerance: float = spec(1.0e-4, number(0.0), "m",
+                            "interference depth beyond which touching panels count as colliding")
+    refine: bool = spec(True, boolean, "", "refine between samples so that no collision is missed")
+
+
+def _bounds(v, path):
+    if not isinstance(v, (list, tuple)) or len(v) != 2:
+        raise SceneError(path, f"expected [lower, upper], got {v!r}")
+    lo, hi = (number(0.0)(x, f"{path}[{i}]") for i, x in enumerate(v))
+    if lo > hi:
+        raise SceneError(path, f"lower bound {lo:g} is above upper bound {hi:g}")
+    return (lo, hi)
+
+
+_bounds.describe = "[lower, upper]"
+
+
+@dataclass(frozen=True)
+class OptimisationSection:
+    p: float = spec(1.0, number(0.0), "s/m", "weight of the approach speed v in f = p v - q d")
+    q: float = spec(10.0, number(0.0), "1/m", "weight of the smallest distance d")
+    flat_weight: float = spec(1.0, number(0.0), "1/rad", "weight of the largest hinge angle left at t_end")
+    bounds: tuple = spec((0.001, 0.2), _bounds, "N m/rad", "lower and upper stiffness bound")
+    k0: float = spec(0.1, number(0, low_open=True), "N m/rad", "starting stiffness K_0")
+    method: str = spec("local", choice("local", "global"), "", "local (scipy minimize) or global (differential evolution)")
+    restarts: int = spec(3, integer(0), "", "restarts from new K_0 while collisions remain")
+    max_evaluations: int = spec(200, integer(1), "", "simulation budget")
+    workers: int = spec(0, integer(0), "", "parallel workers (0: all cores)")
+    seed: int = spec(0, integer(0), "", "random seed for restarts and global search")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene. ``source`` is the file it came from, if any."""
+
+    array: ArraySection
+    fold: FoldSection = FoldSection()
+    hinges: HingeSection = HingeSection()
+    contact: ContactSection = ContactSection()
+    closure: ClosureSection = ClosureSection()
+    gravity: tuple = (0.0, -9.81, 0.0)
+    simulation: SimulationSection = SimulationSection()
+    collision: CollisionSection = CollisionSection()
+    optimisation: OptimisationSection = OptimisationSection()
+    name: str = ""
+    description: str = ""
+    source: str | None = None
+
+    def replace(self, **sections) -> "Scene":
+        return replace(self, **sections)
+
+
+SECTIONS = {
+    "array": ArraySection, "fold": FoldSection, "hinges": HingeSection,
+    "contact": ContactSection, "closure": ClosureSection,
+    "simulation": SimulationSection, "collision": CollisionSection,
+    "optimisation": OptimisationSection,
+}
+TOP_LEVEL = {"gravity": (vector3, "m/s^2", "gravity in the flat array frame (y towards row 1)"),
+             "name": (None, "", "scene name"), "description": (None, "", "free text")}
+
+
+def _parse_section(cls, data, path):
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise SceneError(path, f"expected a mapping, got {_type_name(data)} {data!r}")
+    known = {f.name: f for f in fields(cls)}
+    for key in data:
+        if key not in known:
+            raise SceneError(f"{path}.{key}", f"unknown key (expected one of {', '.join(known)})")
+    values = {}
+    for name, f in known.items():
+        if name in data:
+            values[name] = f.metadata["parse"](data[name], f"{path}.{name}")
+    return cls(**values)
+
+
+def _check_required(section, path, names):
+    for n in names:
+        if getattr(section, n) is None:
+            raise SceneError(f"{path}.{n}", "required key is missing")
+
+
+def scene_from_dict(data: dict, source: str | None = None) -> Scene:
+    """Validate a scene mapping (as read from YAML) and return a :class:`Scene`.
+
+    Raises
+    ------
+    SceneError
+        Naming the key path of the first problem found.
+    """
+    if not isinstance(data, dict):
+        raise SceneError("", f"a scene must be a mapping of sections, got {_type_name(data)}")
+    for key in data:
+        if key not in SECTIONS and key not in TOP_LEVEL:
+            raise SceneError(key, f"unknown section (expected one of {', '.join([*SECTIONS, *TOP_LEVEL])})")
+    if "array" not in data:
+        raise SceneError("array", "required section is missing")
+    sections = {name: _parse_section(cls, data.get(name), name) for name, cls in SECTIONS.items()}
+    arr = sections["array"]
+    _check_required(arr, "array", ("rows", "cols", "length", "width", "thickness"))
+    if (arr.mass is None) == (arr.density is None):
+        raise SceneError("array.mass", "give exactly one of array.mass and array.density")
+    if (arr.rows * arr.cols) % 2:
+        raise SceneError("array", f"{arr.rows} x {arr.cols} = {arr.rows * arr.cols} panels is odd: "
+                                  "two equal stacks need an even panel count")
+    opt = sections["optimisation"]
+    lo, hi = opt.bounds
+    if not lo <= opt.k0 <= hi:
+        raise SceneError("optimisation.k0", f"{opt.k0:g} is outside bounds [{lo:g}, {hi:g}]")
+    gravity = vector3(data["gravity"], "gravity") if "gravity" in data else Scene.gravity
+    for key in ("name", "description"):
+        if key in data and not isinstance(data[key], str):
+            raise SceneError(key, f"expected a string, got {_type_name(data[key])}")
+    return Scene(**sections, gravity=gravity, name=data.get("name", ""),
+                 description=data.get("description", ""), source=source)
+
+
+def load_scene(path) -> Scene:
+    """Read and validate a scene YAML file.
+
+    Raises
+    ------
+    SceneError
+        If the file is missing or unreadable, is not valid YAML, or fails
+        validation; the message names the file and the key path.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise SceneError(str(path), "scene file not found") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise SceneError(str(path), f"cannot read scene file ({e})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(e, "problem", None) or str(e).splitlines()[0]
+        raise SceneError(str(path), f"malformed YAML{where}: {problem}") from None
+    try:
+        return scene_from_dict(data, source=str(path))
+    except SceneError as e:
+        raise SceneError(f"{path.name}: {e.path}" if e.path else path.name, e.reason) from None
+
+
+def describe_schema() -> str:
+    """The schema as a text table: key path, type, unit, default, meaning."""
+    rows = []
+    for name, cls in SECTIONS.items():
+        for f in fields(cls):
+            parse = f.metadata["parse"]
+            rows.append((f"{name}.{f.name}", getattr(parse, "describe", ""), f.metadata["unit"],
+                         "required" if f.default is None and name == "array" and f.name not in ("mass", "density")
+                         else repr(f.default), f.metadata["doc"]))
+    rows.append(("gravity", "[x, y, z]", "m/s^2", repr(Scene.gravity), TOP_LEVEL["gravity"][2]))
+    widths = [max(len(r[i]) for r in rows) for i in range(4)]
+    return "\n".join("  ".join(r[i].ljust(widths[i]) for i in range(4)) + "  " + r[4] for r in rows)

@@ -10,6 +10,7 @@ naming the key path (``simulation.rtol: expected a number > 0, got -1``).
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -27,8 +28,14 @@ def _type_name(v):
     return type(v).__name__
 
 
+_YAML12_FLOAT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+
+
 def number(low=None, high=None, low_open=False, allow_inf=False):
     def parse(v, path):
+        # PyYAML follows YAML 1.1, which reads 1.0e6 (no exponent sign) as a string.
+        if isinstance(v, str) and _YAML12_FLOAT.match(v.strip()):
+            v = float(v)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise SceneError(path, f"expected a number, got {_type_name(v)} {v!r}")
         v = float(v)

@@ -1,0 +1,133 @@
+"""``panel-deploy``: the one command-line entry point; runs every main job without ROS.
+
+Each subcommand only wires scene -> model -> simulation -> collision ->
+optimisation together. Misuse (bad scene, bad arguments) prints one line
+``panel-deploy: error: <key path>: <what was wrong>`` and exits with code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .errors import PanelDeployError, SceneError
+
+
+def resolve_scene(name: str) -> Path:
+    """A scene path, or the name of a scene shipped with the package."""
+    path = Path(name)
+    if path.exists() or path.suffix:
+        return path
+    for base in (Path(__file__).resolve().parent.parent / "config" / "scenes",
+                 Path(sys.prefix) / "share" / "panel_deploy" / "config" / "scenes"):
+        if (base / f"{name}.yaml").exists():
+            return base / f"{name}.yaml"
+    return path
+
+
+def _load(args):
+    from .scene import load_scene
+    return load_scene(resolve_scene(args.scene))
+
+
+def cmd_schema(args):
+    from .scene import describe_schema
+    print(describe_schema())
+    return 0
+
+
+def cmd_fold(args):
+    from .fold.report import fold_command
+    if args.scene:
+        scene = _load(args)
+        args.rows, args.cols = scene.array.rows, scene.array.cols
+        args.circuit_cells = scene.fold
+    elif args.rows is None or args.cols is None:
+        raise SceneError("--rows/--cols", "give --rows and --cols, or --scene FILE")
+    return fold_command(args)
+
+
+def cmd_simulate(args):
+    from .run import simulate_command
+    return simulate_command(args, _load(args))
+
+
+def cmd_collide(args):
+    from .run import collide_command
+    return collide_command(args)
+
+
+def cmd_export(args):
+    from .export import export_command
+    return export_command(args, _load(args))
+
+
+def cmd_bench(args):
+    from .bench import work_precision_command
+    return work_precision_command(args, _load(args))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="panel-deploy", description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("schema", help="print the scene schema (keys, types, units, defaults)")
+    s.set_defaults(func=cmd_schema)
+
+    s = sub.add_parser("fold", help="Hamiltonian circuits, two-stack packing, merging, DoF")
+    s.add_argument("--rows", type=int)
+    s.add_argument("--cols", type=int)
+    s.add_argument("--scene", help="work on the design of a scene file")
+    s.add_argument("--circuit", type=int, help="only this circuit index")
+    s.add_argument("--limit", type=int, default=50, help="list at most this many circuits")
+    s.add_argument("--json", action="store_true", help="machine-readable output")
+    s.add_argument("--plot", metavar="FILE.png", help="draw the design and its stacks")
+    s.set_defaults(func=cmd_fold, circuit_cells=None)
+
+    s = sub.add_parser("simulate", help="simulate one deployment and check it for collisions")
+    s.add_argument("scene", help="scene YAML file, or the name of a shipped scene")
+    s.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    s.add_argument("--out", metavar="FILE.npz", help="save the sampled trajectory")
+    s.add_argument("--stiffness", metavar="RESULT.yaml", help="hinge stiffnesses from an optimisation result")
+    s.add_argument("--method", help="override simulation.method")
+    s.add_argument("--closure", choices=("penalty", "exact"), help="override closure.method")
+    s.add_argument("--t-end", type=float, help="override simulation.t_end (s)")
+    s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser("collide", help="collision check of a saved trajectory")
+    s.add_argument("trajectory", help="trajectory .npz written by simulate --out")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_collide)
+
+    s = sub.add_parser("export", help="export the model (MuJoCo MJCF)")
+    s.add_argument("scene")
+    s.add_argument("--mjcf", metavar="FILE.xml", required=True)
+    s.set_defaults(func=cmd_export)
+
+    s = sub.add_parser("bench", help="benchmarks")
+    bsub = s.add_subparsers(dest="bench", required=True)
+    b = bsub.add_parser("work-precision", help="error against run time, every integrator and MuJoCo")
+    b.add_argument("scene")
+    b.add_argument("--out", default="work_precision.csv", help="CSV file")
+    b.add_argument("--plot", default="work_precision.png", help="log-log plot")
+    b.add_argument("--repeats", type=int, default=3)
+    b.add_argument("--quick", action="store_true", help="fewer tolerances and steps (< 2 min)")
+    b.set_defaults(func=cmd_bench)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args) or 0
+    except PanelDeployError as e:
+        print(f"panel-deploy: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("panel-deploy: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,42 @@
+"""ament_python package that also installs with plain ``pip install .``."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "panel_deploy"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    description="Fold design, deployment dynamics, collision detection and stiffness "
+                "optimisation of thick-panel arrays on spring-loaded hinges",
+    license="Apache-2.0",
+    python_requires=">=3.11",
+    packages=find_packages(exclude=["test", "test.*", "bench"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/config/scenes", glob("config/scenes/*.yaml")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.py")),
+    ],
+    install_requires=[
+        "numpy>=1.26",
+        "scipy>=1.11",
+        "networkx>=3.0",
+        "PyYAML>=6.0",
+        "python-fcl>=0.7",
+        "numba>=0.59",
+        "matplotlib>=3.7",
+    ],
+    extras_require={
+        "test": ["pytest>=7", "mujoco>=3.0", "dask[distributed]>=2024.1"],
+    },
+    zip_safe=True,
+    entry_points={
+        "console_scripts": [
+            "panel-deploy = panel_deploy.cli:main",
+        ],
+    },
+)

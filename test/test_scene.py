@@ -1,0 +1,125 @@
+"""Scene loading: defaults, the shipped scenes, and every class of bad input."""
+
+import copy
+from pathlib import Path
+
+import pytest
+
+from panel_deploy.cli import main
+from panel_deploy.errors import SceneError
+from panel_deploy.scene import describe_schema, load_scene, scene_from_dict
+
+ROOT = Path(__file__).resolve().parent.parent
+PAPER = ROOT / "config" / "scenes" / "paper_4x4.yaml"
+MINIMAL = {"array": {"rows": 4, "cols": 4, "length": 0.1, "width": 0.1,
+                     "thickness": 0.005, "mass": 0.02}}
+
+
+def with_(path, value):
+    data = copy.deepcopy(MINIMAL)
+    *head, last = path.split(".")
+    node = data
+    for key in head:
+        node = node.setdefault(key, {})
+    node[last] = value
+    return data
+
+
+def test_paper_scene_loads_with_reference_values():
+    s = load_scene(PAPER)
+    assert (s.array.rows, s.array.cols) == (4, 4)
+    assert s.array.unit_mass == pytest.approx(0.02)
+    assert s.hinges.stiffness == 0.1 and s.hinges.damping_ratio * 0.1 == pytest.approx(0.0043)
+    assert s.gravity == (0.0, -9.81, 0.0)
+    assert s.fold.ground == (1, 2) and len(s.fold.circuit) == 16
+    assert s.optimisation.bounds == (0.001, 0.2)
+
+
+def test_every_shipped_scene_loads():
+    scenes = sorted((ROOT / "config" / "scenes").glob("*.yaml"))
+    assert scenes
+    for path in scenes:
+        assert load_scene(path).array.rows >= 1
+
+
+def test_defaults_and_density():
+    s = scene_from_dict(MINIMAL)
+    assert s.simulation.method == "RK23" and s.simulation.samples == 301
+    d = with_("array.density", 1000.0)
+    del d["array"]["mass"]
+    assert scene_from_dict(d).array.unit_mass == pytest.approx(1000 * 0.1 * 0.1 * 0.005)
+
+
+@pytest.mark.parametrize("path, value, expected", [
+    ("array.rows", "four", "array.rows: expected an integer"),
+    ("array.rows", 2.5, "array.rows: expected an integer"),
+    ("array.length", -0.1, "array.length: expected a number > 0"),
+    ("array.thickness", 0, "array.thickness: expected a number > 0"),
+    ("array.mass", True, "array.mass: expected a number"),
+    ("array.density", 1000.0, "array.mass: give exactly one"),
+    ("array.cols", 3, "array: 4 x 3 = 12"),  # even: must load, checked below
+    ("array.colour", "red", "array.colour: unknown key"),
+    ("simulation.rtol", -1, "simulation.rtol: expected a number > 0, got -1"),
+    ("simulation.method", "Euler", "simulation.method: expected one of RK23"),
+    ("simulation.samples", 2, "simulation.samples: expected an integer >= 3"),
+    ("simulation.t_end", float("nan"), "simulation.t_end: expected a finite number"),
+    ("closure.method", "lagrange", "closure.method: expected one of penalty, exact"),
+    ("fold.ground", [0, 1], "fold.ground: expected a cell"),
+    ("fold.circuit", "zigzag", "fold.circuit: expected a circuit index or a list of cells"),
+    ("fold.merge", [[[1, 2]]], "fold.merge: expected auto, none or a list of cell pairs"),
+    ("gravity", [0, -9.81], "gravity: expected a list of 3 numbers"),
+    ("optimisation.bounds", [0.2, 0.001], "optimisation.bounds: lower bound 0.2 is above"),
+    ("optimisation.k0", 0.5, "optimisation.k0: 0.5 is outside bounds"),
+    ("hinges.groups", [[]], "hinges.groups[0]: a group needs at least one hinge"),
+    ("contact", [1, 2], "contact: expected a mapping"),
+    ("velocity", 3, "velocity: unknown section"),
+])
+def test_bad_values_name_the_key(path, value, expected):
+    data = with_(path, value)
+    if path == "array.cols":  # 4 x 3 is even and valid; make it odd
+        data["array"]["rows"] = 3
+        expected = "array: 3 x 3 = 9 panels is odd"
+    with pytest.raises(SceneError) as e:
+        scene_from_dict(data)
+    assert str(e.value).startswith(expected), str(e.value)
+
+
+def test_missing_required_keys():
+    with pytest.raises(SceneError, match="^array: required section is missing"):
+        scene_from_dict({"simulation": {}})
+    data = copy.deepcopy(MINIMAL)
+    del data["array"]["thickness"]
+    with pytest.raises(SceneError, match="^array.thickness: required key is missing"):
+        scene_from_dict(data)
+    with pytest.raises(SceneError, match="a scene must be a mapping"):
+        scene_from_dict([1, 2])
+
+
+def test_file_errors(tmp_path):
+    with pytest.raises(SceneError, match="scene file not found"):
+        load_scene(tmp_path / "nope.yaml")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("array: {rows: 4, cols: [\n")
+    with pytest.raises(SceneError, match=r"malformed YAML at line \d+"):
+        load_scene(bad)
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text("array: {rows: 4, cols: 4, length: 0.1, width: 0.1, thickness: -1, mass: 1}\n")
+    with pytest.raises(SceneError, match=r"^wrong.yaml: array.thickness: expected a number > 0"):
+        load_scene(wrong)
+
+
+def test_cli_bad_scene_is_one_line_exit_2(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("array: {rows: 4, cols: 4, length: 0.1, width: 0.1, thickness: 0.005, mass: 0.02}\n"
+                   "simulation: {rtol: -1}\n")
+    assert main(["simulate", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["panel-deploy: error: bad.yaml: simulation.rtol: expected a number > 0, got -1"]
+    assert main(["simulate", str(tmp_path / "missing.yaml")]) == 2
+    assert "scene file not found" in capsys.readouterr().err
+
+
+def test_schema_lists_every_section():
+    text = describe_schema()
+    for key in ("array.rows", "closure.k_M", "simulation.rtol", "optimisation.bounds", "gravity"):
+        assert key in text

@@ -71,6 +71,7 @@ _REASONS = {
     "closure": "the closing hinge does not bring the loop back to the ground",
     "flat-facet": "the flat hinges' lines cannot all get a free stack edge",
     "ground-top": "the ground would not be on the top layer",
+    "reach": "the walk would cut off empty slots it must still fill",
 }
 
 
@@ -127,7 +128,9 @@ def _search(geo, walk, ground_on_top, max_nodes, stats) -> Iterator[tuple]:
     }
     motions = [_IDENTITY] + [None] * (n - 1)
     choices = [None] * n  # choices[k]: hinge between walk[k-1] and walk[k]; [0]: closing
-    occupied = {(root[0], root[1], 0)}
+    # Occupancy per stack (0: the ground's, 1: the other) as bit sets over
+    # layer levels, level = z / 2 + half, so the ground sits at bit `half`.
+    occ = [1 << half, 0]
     segments = set()
     state = {"other": None, "zmin": 0, "zmax": 0, "nodes": 0}
     options = (("flat", None), ("fold", 1), ("fold", -1))
@@ -179,6 +182,48 @@ def _search(geo, walk, ground_on_top, max_nodes, stats) -> Iterator[tuple]:
             if seg is not None:
                 segments.discard(seg)
 
+    ground_bit = 1 << half
+
+    def reachable(stack, bit, lo, hi):
+        """Can a walk from the new cell still fill every slot it must fill?
+
+        The walk moves between ladder neighbours (a fold: the adjacent layer of
+        the same stack; a flat hinge: the other stack, same layer) through empty
+        slots, must fill every empty slot between the lowest and highest layer
+        used so far, and must end next to the ground to close the loop.
+        """
+        # Levels any final window of `half` layers containing lo..hi can use.
+        wlo, whi = hi - half + 1, lo + half - 1
+        window = ((1 << (whi + 1)) - 1) & ~((1 << wlo) - 1)
+        empty = [~occ[0] & window, ~occ[1] & window]
+        if not (empty[0] & ((ground_bit << 1) | (ground_bit >> 1)) or empty[1] & ground_bit):
+            return False
+        need = (1 << (hi + 1)) - (1 << lo)
+        # Hamiltonian-path degree rule: a slot to fill needs two ways in and out
+        # (empty neighbours, the head, or the ground for the final cell).
+        head = [bit if stack == 0 else 0, bit if stack == 1 else 0]
+        loose = 0
+        for with_ground in (True, False):
+            ext = [empty[0] | head[0] | (ground_bit if with_ground else 0), empty[1] | head[1]]
+            for s_ in (0, 1):
+                a, b, c = ext[s_] << 1, ext[s_] >> 1, ext[1 - s_]
+                short = empty[s_] & need & ~((a & b) | (a & c) | (b & c))
+                if with_ground:
+                    if short:
+                        return False
+                else:
+                    loose += bin(short).count("1")
+        if loose > 1:
+            return False
+        reach = head
+        while True:
+            a = (reach[0] | (reach[0] << 1) | (reach[0] >> 1) | reach[1]) & (empty[0] | head[0])
+            b = (reach[1] | (reach[1] << 1) | (reach[1] >> 1) | reach[0]) & (empty[1] | head[1])
+            if a == reach[0] and b == reach[1]:
+                break
+            reach = [a, b]
+        return not (empty[0] & need & ~reach[0] or empty[1] & need & ~reach[1])
+
     def extend(k):
         state["nodes"] += 1
         if state["nodes"] > max_nodes:
@@ -213,17 +258,23 @@ def _search(geo, walk, ground_on_top, max_nodes, stats) -> Iterator[tuple]:
             if (zmax - zmin) // 2 + 1 > half:
                 stats["span"] += 1
                 continue
-            if (x, y, zc) in occupied:
+            stack = 0 if (x, y) == (root[0], root[1]) else 1
+            bit = 1 << (zc // 2 + half)
+            if occ[stack] & bit:
                 stats["slot"] += 1
                 continue
             if seg is not None and seg in segments:
                 stats["hinge"] += 1
                 continue
+            occ[stack] |= bit
+            if k < n - 1 and not reachable(stack, bit, zmin // 2 + half, zmax // 2 + half):
+                stats["reach"] += 1
+                occ[stack] &= ~bit
+                continue
             saved = (state["other"], state["zmin"], state["zmax"])
-            if (x, y) != (root[0], root[1]) and other is None:
+            if stack == 1 and other is None:
                 state["other"] = (x, y)
             state["zmin"], state["zmax"] = zmin, zmax
-            occupied.add((x, y, zc))
             if seg is not None:
                 segments.add(seg)
             motions[k] = h
@@ -231,7 +282,7 @@ def _search(geo, walk, ground_on_top, max_nodes, stats) -> Iterator[tuple]:
             yield from extend(k + 1)
             if seg is not None:
                 segments.discard(seg)
-            occupied.discard((x, y, zc))
+            occ[stack] &= ~bit
             state["other"], state["zmin"], state["zmax"] = saved
 
     yield from extend(1)
@@ -358,16 +409,16 @@ def find_stowed_state(
     geo = _Geometry(rows, cols)
     walk = _walk(circuit, ground)
     stats = Counter()
-    for ground_on_top in (True, False):
-        try:
-            for motions, choices, facets in _search(geo, walk, ground_on_top, max_nodes, stats):
-                return _build_state(geo, walk, motions, choices, facets), ""
-        except _BudgetExceeded:
-            return None, (
-                f"undecided: the packing search exceeded {max_nodes} nodes "
-                "(raise max_nodes)"
-            )
-    del stats["ground-top"]
+    # Unrestricted first: it decides the verdict, and if its first package has
+    # the ground on top it is also the first of the restricted order.
+    try:
+        first = next(_search(geo, walk, False, max_nodes, stats), None)
+        if first is not None and max(_apply(m, geo.centre(c))[2] for m, c in zip(first[0], walk)) > 0:
+            first = next(_search(geo, walk, True, max_nodes, Counter()), first)
+    except _BudgetExceeded:
+        return None, f"undecided: the packing search exceeded {max_nodes} nodes (raise max_nodes)"
+    if first is not None:
+        return _build_state(geo, walk, *first), ""
     if not stats:
         return None, "no two-stack package: no branch of the search survives"
     ranked = ", ".join(f"{_REASONS[k]} ({v}x)" for k, v in stats.most_common())

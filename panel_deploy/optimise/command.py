@@ -1,0 +1,73 @@
+"""``panel-deploy optimise SCENE``: wiring of optimise, verify, snap, tolerance check."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from .io import dump_result, result_to_dict, save_result
+from .manufacture import snap_to_springs, tolerance_check, verify
+from .search import optimise, print_progress
+
+
+def optimise_command(args, scene) -> int:
+    """Run the optimisation a scene describes; exit code 0 if a feasible K was found.
+
+    ``args`` attributes (all optional except as noted; argparse flags in brackets):
+
+    - ``out`` [--out RESULT.yaml]: result file; without it the YAML goes to stdout.
+    - ``workers`` [--workers N]: local processes (0 all cores, 1 serial).
+    - ``dask`` [--dask ADDRESS]: Dask scheduler to run the evaluations on.
+    - ``method`` [--method local|global], ``max_evaluations`` [--max-evaluations N]:
+      override the scene.
+    - ``springs`` [--springs 0.07,0.1]: available spring stiffnesses (N m/rad);
+      snap the optimum to them (up to two in parallel, hinges ten times softer
+      than the rest unsprung) and re-verify.
+    - ``perturb`` [--perturb N]: re-simulate N copies with k and c off by up to
+      ``perturb_tol`` [--perturb-tol 0.05] and count the collision-free ones.
+    - ``quiet`` [--quiet]: no progress lines (they go to stderr).
+    - ``json`` [--json]: print a one-object JSON summary instead of the YAML.
+    """
+    from ..build import build_model
+
+    def arg(name, default=None):
+        return getattr(args, name, default)
+
+    model = build_model(scene)
+    quiet = arg("quiet", False)
+    result = optimise(model, scene, workers=arg("workers"),
+                      dask_address=arg("dask"),
+                      progress=None if quiet else (lambda p: print_progress(p, sys.stderr)),
+                      method=arg("method"),
+                      max_evaluations=arg("max_evaluations"))
+    extra = {}
+    check = verify(model, result.k, scene)
+    extra["verification"] = {"tighten": 10.0, "refine": 2, **check.summary()}
+    springs = arg("springs")
+    if springs:
+        values = [float(s) for s in springs.split(",")] if isinstance(springs, str) else springs
+        snap = snap_to_springs(result.k, values)
+        built = verify(model, snap.k, scene, tighten=1.0, refine=1)
+        extra["manufacture"] = {
+            "springs": values,
+            "hinges": {name: {"k": float(k), "springs": list(s), "zeroed": bool(z)}
+                       for name, k, s, z in zip(result.problem.hinge_names, snap.k,
+                                                snap.springs, snap.zeroed)},
+            **built.summary()}
+    n = arg("perturb")
+    if n:
+        tol = arg("perturb_tol") or 0.05
+        report = tolerance_check(model, result.k, scene, n=n, stiffness_tol=tol, damping_tol=tol,
+                                 workers=arg("workers"), dask_address=arg("dask"))
+        extra["tolerance"] = report.to_dict()
+    out = arg("out")
+    if out:
+        save_result(result, out, scene.name, extra)
+    if arg("json", False):
+        print(json.dumps(result_to_dict(result, scene.name, extra)))
+    elif not out:
+        print(dump_result(result, scene.name, extra), end="")
+    else:
+        print(f"{result.message}: f = {result.f:.5f}, nfev {result.nfev}, "
+              f"{result.wall_time:.1f} s -> {out}")
+    return 0 if result.success else 1

@@ -1,0 +1,120 @@
+"""The optimisation result file (YAML) and reading stiffness back from it.
+
+Format (``format: panel_deploy.stiffness/1``)::
+
+    format: panel_deploy.stiffness/1
+    scene: paper_4x4
+    hinges:                      # every hinge of the model, N m/rad and N m s/rad
+      h_1_1-1_2: {k: 0.0123, c: 0.000529}
+      ...
+    groups: [[h_1_1-1_2, h_1_3-1_4], ...]
+    f: -0.21                     # objective, Eq. (8) + flat term
+    v: 0.0                       # m/s, approach speed at the first collision
+    d: 0.021                     # m, smallest proximal distance
+    collision: null              # or {time, pair, ...} of the first collision
+    reached_flat: true
+    flat_residual: 0.003         # rad, largest |theta| at the end time
+    initial: {f, v, d, collision, ...}   # the same for K_0
+    success, status, message, nfev, nit, nstarts, method, wall_time
+
+:func:`load_stiffness` reads only ``hinges`` (and accepts a plain
+``{hinge: k}`` mapping there), so hand-written files work too.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..errors import OptimisationError
+
+FORMAT = "panel_deploy.stiffness/1"
+
+
+def result_to_dict(result, scene_name: str = "", extra: dict | None = None) -> dict:
+    """Plain-Python form of an :class:`~panel_deploy.optimise.search.OptimisationResult`.
+
+    ``extra`` (plain values) is appended, e.g. the verification and
+    manufacturing checks of ``panel-deploy optimise``.
+    """
+    names = result.problem.hinge_names
+    out = {"format": FORMAT, "scene": scene_name,
+           "hinges": {n: {"k": float(k), "c": float(c)}
+                      for n, k, c in zip(names, result.k, result.c)},
+           "groups": result.problem.group_names(),
+           "bounds": [float(b) for b in result.problem.bounds]}
+    out.update(result.best.summary())
+    out["initial"] = result.initial.summary() if result.initial is not None else None
+    out.update(success=bool(result.success), status=int(result.status), message=result.message,
+               nfev=int(result.nfev), nit=int(result.nit), nstarts=int(result.nstarts),
+               method=result.method, wall_time=round(float(result.wall_time), 3))
+    out.update(extra or {})
+    return out
+
+
+def dump_result(result, scene_name: str = "", extra: dict | None = None) -> str:
+    """The YAML text :func:`save_result` writes."""
+    return yaml.safe_dump(result_to_dict(result, scene_name, extra), sort_keys=False,
+                          default_flow_style=None)
+
+
+def save_result(result, path, scene_name: str = "", extra: dict | None = None) -> Path:
+    """Write ``result`` as YAML to ``path`` (see the module docstring); returns the path."""
+    path = Path(path)
+    path.write_text(dump_result(result, scene_name, extra))
+    return path
+
+
+def load_stiffness(path, model) -> np.ndarray:
+    """Hinge stiffnesses from a result file, in the order of ``model.hinges``.
+
+    Parameters
+    ----------
+    path : str or Path
+        A file written by :func:`save_result`, or any YAML mapping with a
+        ``hinges`` mapping of hinge name to ``{k: ...}`` or to a number.
+    model : Model
+        Every one of its hinges must be given, and no other.
+
+    Returns
+    -------
+    k : (n_hinges,) ndarray
+        N m/rad; use ``model.with_stiffness(k)`` (damping follows k).
+
+    Raises
+    ------
+    OptimisationError
+        ``stiffness file ...`` naming the file and the offending entry.
+    """
+    where = f"stiffness file {str(path)!r}"
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except OSError as e:
+        raise OptimisationError(f"{where}: cannot read ({e.strerror or e})") from None
+    except yaml.YAMLError as e:
+        raise OptimisationError(f"{where}: not valid YAML ({e})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("hinges"), dict):
+        raise OptimisationError(f"{where}: expected a mapping with a 'hinges' mapping "
+                                f"(hinge name -> k), as written by panel-deploy optimise")
+    given = data["hinges"]
+    names = [h.name for h in model.hinges]
+    unknown = sorted(set(map(str, given)) - set(names))
+    missing = [n for n in names if n not in given]
+    if unknown:
+        raise OptimisationError(f"{where}: hinges.{unknown[0]}: no such hinge in this model "
+                                f"(hinges are: {', '.join(names)})")
+    if missing:
+        raise OptimisationError(f"{where}: hinges: missing {', '.join(missing)}")
+    k = np.empty(len(names))
+    for i, name in enumerate(names):
+        entry = given[name]
+        value = entry.get("k") if isinstance(entry, dict) else entry
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not math.isfinite(value) or value < 0:
+            raise OptimisationError(f"{where}: hinges.{name}.k: expected a finite number >= 0 "
+                                    f"N m/rad, got {value!r}")
+        k[i] = value
+    return k

@@ -1,0 +1,213 @@
+"""Where evaluations run: in-process, on a local process pool, or on Dask.
+
+All three backends run the same picklable task, :func:`evaluate_job`, so a
+result does not depend on where it was computed. :class:`Evaluator` adds
+the cache by K and the evaluation budget on top of any backend.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from ..errors import OptimisationError
+from .evaluate import Evaluation, evaluate, run_deployment
+
+#: Seconds to wait for a Dask scheduler before giving up.
+CONNECT_TIMEOUT = 5.0
+
+
+@dataclass(frozen=True)
+class Job:
+    """What every evaluation of one optimisation shares (sent once per worker)."""
+
+    model: object
+    settings: object
+    evaluation: Callable = run_deployment
+
+
+def evaluate_job(job: Job, k, c=None) -> Evaluation:
+    """:func:`~panel_deploy.optimise.evaluate.evaluate` for one K of ``job``."""
+    return evaluate(job.model, k, job.settings, c=c, evaluation=job.evaluation)
+
+
+_WORKER_JOB = None
+
+
+def _init_worker(job):
+    global _WORKER_JOB
+    _WORKER_JOB = job
+
+
+def _evaluate_in_worker(kc):
+    return evaluate_job(_WORKER_JOB, *kc)
+
+
+class SerialBackend:
+    """Evaluations one after the other in this process."""
+
+    workers = 1
+
+    def __init__(self, job: Job):
+        self.job = job
+
+    def map(self, kcs):
+        return [evaluate_job(self.job, k, c) for k, c in kcs]
+
+    def close(self):
+        pass
+
+
+class ProcessBackend:
+    """A pool of local worker processes, the job sent once to each.
+
+    Uses the forkserver start method: forking a process that already runs
+    threads (numba, a Dask client) can deadlock the child.
+    """
+
+    def __init__(self, job: Job, workers: int):
+        self.workers = workers
+        ctx = multiprocessing.get_context("forkserver" if os.name == "posix" else "spawn")
+        self._pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
+                                         initargs=(job,))
+
+    def map(self, kcs):
+        return list(self._pool.map(_evaluate_in_worker, kcs))
+
+    def close(self):
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+class DaskBackend:
+    """Evaluations on an existing Dask distributed cluster.
+
+    Parameters
+    ----------
+    job : Job
+        Scattered to every worker once.
+    address : str
+        Scheduler address, e.g. ``tcp://10.0.0.5:8786``.
+    timeout : float
+        Seconds to wait for the scheduler.
+
+    Raises
+    ------
+    OptimisationError
+        ``dask_address`` naming the address, if distributed is not installed
+        or the scheduler does not answer within ``timeout``.
+    """
+
+    def __init__(self, job: Job, address: str, timeout: float = CONNECT_TIMEOUT):
+        try:
+            from distributed import Client
+        except ImportError:
+            raise OptimisationError("dask_address: the 'distributed' package is not installed "
+                                    "(pip install 'dask[distributed]')") from None
+        if not isinstance(address, str) or not address.strip():
+            raise OptimisationError(f"dask_address: expected a scheduler address such as "
+                                    f"tcp://host:8786, got {address!r}")
+        try:
+            self._client = Client(address, timeout=timeout, set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as e:
+            raise OptimisationError(f"dask_address: cannot reach a Dask scheduler at {address!r} "
+                                    f"within {timeout:g} s ({type(e).__name__}: {e})") from None
+        self.workers = max(1, sum(self._client.nthreads().values()))
+        self._job = self._client.scatter([job], broadcast=True)[0]
+
+    def map(self, kcs):
+        futures = [self._client.submit(evaluate_job, self._job, k, c, pure=False) for k, c in kcs]
+        return self._client.gather(futures)
+
+    def close(self):
+        self._client.close()
+
+
+def make_backend(job: Job, workers: int | None = None, dask_address: str | None = None):
+    """The backend asked for: Dask if ``dask_address``, else ``workers`` local processes.
+
+    ``workers`` 0 or None means all cores; 1 runs in this process.
+    """
+    if dask_address is not None:
+        return DaskBackend(job, dask_address)
+    if workers is None or workers == 0:
+        workers = os.cpu_count() or 1
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 0:
+        raise OptimisationError(f"workers: expected an integer >= 0, got {workers!r}")
+    return SerialBackend(job) if workers == 1 else ProcessBackend(job, workers)
+
+
+class BudgetExhausted(Exception):
+    """Raised inside a solver's objective to stop it when the budget is spent."""
+
+
+class Evaluator:
+    """Cached, budgeted evaluation of batches of K on a backend.
+
+    Parameters
+    ----------
+    backend : SerialBackend, ProcessBackend or DaskBackend
+    max_evaluations : int
+        Simulations allowed; cached K are free.
+    on_batch : callable, optional
+        Called with no argument after each batch (progress reporting).
+    """
+
+    def __init__(self, backend, max_evaluations: int, on_batch=None):
+        self.backend = backend
+        self.max_evaluations = max_evaluations
+        self.on_batch = on_batch
+        self.cache = {}
+        self.history = []
+        self.best = None
+        self.start = time.perf_counter()
+
+    @property
+    def nfev(self) -> int:
+        return len(self.history)
+
+    @staticmethod
+    def key(k, c=None):
+        # Rounded so that K reached by different float paths share an entry.
+        kk = tuple(np.round(np.asarray(k, dtype=float), 12))
+        return kk if c is None else kk + tuple(np.round(np.asarray(c, dtype=float), 12))
+
+    def map(self, ks, cs=None) -> list:
+        """Evaluations of every K of ``ks`` (and damping ``cs``), in order.
+
+        Raises :class:`BudgetExhausted`, before running anything, if the new
+        K of the batch do not fit in the budget.
+        """
+        cs = [None] * len(ks) if cs is None else cs
+        keys = [self.key(k, c) for k, c in zip(ks, cs)]
+        todo = {}
+        for key, k, c in zip(keys, ks, cs):
+            if key not in self.cache and key not in todo:
+                todo[key] = (np.asarray(k, dtype=float), None if c is None else np.asarray(c, float))
+        if self.nfev + len(todo) > self.max_evaluations:
+            raise BudgetExhausted
+        if todo:
+            for key, ev in zip(todo, self.backend.map(list(todo.values()))):
+                self.cache[key] = ev
+                self.history.append(ev)
+                if self.best is None or _better(ev, self.best):
+                    self.best = ev
+            if self.on_batch is not None:
+                self.on_batch()
+        return [self.cache[key] for key in keys]
+
+    @property
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.start
+
+
+def _better(a: Evaluation, b: Evaluation) -> bool:
+    """Feasible beats infeasible; then the lower f."""
+    if a.outcome.feasible != b.outcome.feasible:
+        return a.outcome.feasible
+    return a.f < b.f

@@ -1,0 +1,292 @@
+"""Stiffness optimisation, paper section 3.3 and Fig. 4.
+
+Local search: L-BFGS-B (bounded quasi-Newton; the paper used fmincon's
+interior-reflective Newton method) on x = log10 k per hinge group, restarted
+from a new random K_0 while the best K still collides or does not reach
+flat. Global search: differential evolution seeded with K_0, then the local
+search from its best point.
+
+Why the gradient is taken the way it is: f(K) is piecewise and noisy. The
+first collision is found on a sample grid, so v jumps when the collision
+moves by one sample; d is a minimum over samples and changes slope when the
+closest pair or instant switches; a collision appearing or vanishing jumps f
+from -q d to p v. Finite differences at scipy's default step (~1e-8) would
+measure those jumps and the integrator's error, not the trend. So the
+gradient is a forward difference with a deliberately large step
+``fd_step`` in log10 k (default 0.05, a 12 % change of the spring): that
+moves the deployment's events by several sample intervals, so the difference
+averages over the sampling noise, and the n + 1 evaluations of a gradient
+run as one parallel batch.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, NamedTuple
+
+import numpy as np
+from scipy.optimize import differential_evolution, minimize
+
+from ..errors import OptimisationError
+from .evaluate import Evaluation, damping_ratio, run_deployment
+from .parallel import BudgetExhausted, Evaluator, Job, make_backend
+from .problem import StiffnessProblem
+
+
+class Progress(NamedTuple):
+    """What a progress callback receives after every batch of evaluations."""
+
+    phase: str          #: "K_0", "global", "local 1", "local 2" (restart), ...
+    iteration: int      #: solver iterations completed in this phase
+    nfev: int           #: simulations spent so far
+    best_f: float       #: objective of the best K so far
+    collision: bool     #: the best K so far collides
+    reached_flat: bool  #: the best K so far ends flat
+    elapsed: float      #: s since the start
+
+
+def print_progress(p: Progress, file=None) -> None:
+    """One line per progress report (the CLI's default)."""
+    print(f"{p.phase:>9}  it {p.iteration:3d}  nfev {p.nfev:4d}  best f {p.best_f:+.5f}  "
+          f"collision {'yes' if p.collision else 'no '}  flat {'yes' if p.reached_flat else 'no '}  "
+          f"{p.elapsed:7.1f} s", file=file, flush=True)
+
+
+@dataclass
+class OptimisationResult:
+    """Result of :func:`optimise`, in the manner of scipy's ``OptimizeResult``.
+
+    Attributes
+    ----------
+    k, c : (n_hinges,) ndarray
+        Best stiffness (N m/rad) and its damping (N m s/rad), per hinge.
+    best : Evaluation
+        The best K's evaluation (``best.outcome`` has v, d, collision, flat).
+    initial : Evaluation
+        The evaluation of K_0 (None if the budget did not allow it).
+    problem : StiffnessProblem
+        Groups, bounds, K_0.
+    success : bool
+        The best K is collision-free and reaches flat.
+    status : int
+        0 feasible and the solver converged; 1 feasible, stopped by the
+        evaluation budget or the iteration limit; 2 no feasible K found.
+    message : str
+    nfev : int
+        Simulations run (cached repeats not counted).
+    nit : int
+        Solver iterations over all phases.
+    nstarts : int
+        Local searches started (1 + restarts used).
+    method : str
+        "local" or "global".
+    wall_time : float
+        s.
+    history : list of Evaluation
+        Every evaluation, in the order run.
+    """
+
+    k: np.ndarray
+    c: np.ndarray
+    best: Evaluation
+    initial: Evaluation | None
+    problem: StiffnessProblem
+    success: bool
+    status: int
+    message: str
+    nfev: int
+    nit: int
+    nstarts: int
+    method: str
+    wall_time: float
+    history: list = field(default_factory=list, repr=False)
+
+    @property
+    def f(self) -> float:
+        return self.best.f
+
+    @property
+    def outcome(self):
+        return self.best.outcome
+
+
+def optimise(model, settings, *, workers=None, dask_address=None, progress: Callable | None = None,
+             groups=None, method=None, max_evaluations=None, restarts=None, seed=None,
+             fd_step=0.05, popsize=2, evaluation=run_deployment) -> OptimisationResult:
+    """Choose hinge stiffnesses K so that the array deploys without collision.
+
+    Minimises f(K) of :func:`~panel_deploy.optimise.evaluate.objective`
+    (Eq. (8) plus a term for not reaching flat) over one stiffness per hinge
+    group, with c following k (Rayleigh damping).
+
+    Parameters
+    ----------
+    model : Model
+        Base model; its c/k ratios set the damping.
+    settings : Scene
+        ``optimisation`` gives p, q, flat_weight, bounds, k0, method,
+        restarts, max_evaluations, workers, seed; ``simulation`` and
+        ``collision`` are used for every evaluation.
+    workers : int, optional
+        Local processes; 0 all cores, 1 in this process. Default
+        ``settings.optimisation.workers``.
+    dask_address : str, optional
+        Run the evaluations on this Dask scheduler instead of locally.
+    progress : callable, optional
+        Called with a :class:`Progress` after every batch of evaluations.
+    groups : sequence of sequence of (int or str), optional
+        Override ``model.metadata["hinge_groups"]``.
+    method, max_evaluations, restarts, seed : optional
+        Override the scene's values.
+    fd_step : float
+        Forward-difference step in log10 k (see the module docstring).
+    popsize : int
+        Differential evolution population per variable (global method).
+    evaluation : callable
+        ``evaluation(model, settings) -> Outcome``, picklable, top-level;
+        default simulate + collision check.
+
+    Returns
+    -------
+    OptimisationResult
+
+    Raises
+    ------
+    OptimisationError
+        Bad bounds, K_0, groups, workers, method, or an unreachable scheduler.
+    """
+    opt = settings.optimisation
+    method = opt.method if method is None else method
+    if method not in ("local", "global"):
+        raise OptimisationError(f"method: expected local or global, got {method!r}")
+    max_evaluations = opt.max_evaluations if max_evaluations is None else max_evaluations
+    restarts = opt.restarts if restarts is None else restarts
+    for name, value, low in (("max_evaluations", max_evaluations, 1), ("restarts", restarts, 0)):
+        if not isinstance(value, int) or isinstance(value, bool) or value < low:
+            raise OptimisationError(f"{name}: expected an integer >= {low}, got {value!r}")
+    if not fd_step > 0:
+        raise OptimisationError(f"fd_step: expected a step > 0 in log10 k, got {fd_step!r}")
+    problem = StiffnessProblem.from_model(model, opt.bounds, opt.k0, groups)
+    damping_ratio(model)  # fail now, not in a worker, if c/k is unknown
+    rng = np.random.default_rng(opt.seed if seed is None else seed)
+    backend = make_backend(Job(model, settings, evaluation),
+                           opt.workers if workers is None else workers, dask_address)
+    search = _Search(problem, backend, max_evaluations, progress, fd_step)
+    start = time.perf_counter()
+    try:
+        converged = search.run(method, restarts, rng, popsize)
+    finally:
+        backend.close()
+    return search.result(method, converged, time.perf_counter() - start)
+
+
+class _Search:
+    """State of one optimisation run: evaluator, phase, iteration counts."""
+
+    def __init__(self, problem, backend, max_evaluations, progress, fd_step):
+        self.problem = problem
+        self.progress = progress
+        self.fd_step = fd_step
+        self.evaluator = Evaluator(backend, max_evaluations, on_batch=self._report)
+        self.phase = ""
+        self.iteration = 0
+        self.nit = 0
+        self.nstarts = 0
+        self.budget_spent = False
+
+    def _report(self):
+        if self.progress is not None:
+            b = self.evaluator.best
+            self.progress(Progress(self.phase, self.iteration, self.evaluator.nfev, float(b.f),
+                                   b.outcome.collided, b.outcome.reached_flat,
+                                   self.evaluator.elapsed))
+
+    def _iterated(self, *_):
+        self.iteration += 1
+        self.nit += 1
+
+    def _batch(self, xs) -> list:
+        return self.evaluator.map([self.problem.k_of(x) for x in xs])
+
+    def fun_and_grad(self, x):
+        """f(x) and its forward-difference gradient, as one parallel batch."""
+        lo, hi = np.array(self.problem.x_bounds).T
+        # Step backwards where a forward step would leave the bounds.
+        h = np.where(x + self.fd_step <= hi, self.fd_step, -self.fd_step)
+        h = np.where(x + h >= lo, h, hi - x)
+        points = [x] + [x + h[i] * np.eye(len(x))[i] for i in range(len(x))]
+        f = np.array([e.f for e in self._batch(points)])
+        return f[0], (f[1:] - f[0]) / h
+
+    def local(self, x0) -> bool:
+        """One L-BFGS-B run from x0; True if it converged."""
+        self.nstarts += 1
+        self.phase, self.iteration = f"local {self.nstarts}", 0
+        res = minimize(self.fun_and_grad, x0, jac=True, method="L-BFGS-B",
+                       bounds=self.problem.x_bounds, callback=self._iterated,
+                       # ftol near the objective's noise level: below it the
+                       # solver would only chase sampling noise.
+                       options={"ftol": 1e-4, "gtol": 1e-4, "maxiter": 50})
+        return bool(res.success)
+
+    def global_(self, rng, popsize) -> None:
+        """Differential evolution over the whole box, seeded with K_0."""
+        self.phase, self.iteration = "global", 0
+        n = self.problem.n
+        generations = max(1, (self.evaluator.max_evaluations - self.evaluator.nfev)
+                          // (popsize * n) - 1)
+
+        def batch(xs):
+            return np.array([e.f for e in self._batch(np.atleast_2d(xs.T))])
+
+        differential_evolution(batch, self.problem.x_bounds, x0=np.log10(self.problem.k0),
+                               popsize=popsize, maxiter=generations, vectorized=True,
+                               updating="deferred", polish=False, tol=1e-3,
+                               rng=rng, callback=self._iterated)
+
+    def run(self, method, restarts, rng, popsize) -> bool:
+        """Fig. 4: search, restart while no feasible K; True if the last local search converged."""
+        x0 = np.log10(self.problem.k0)
+        converged = False
+        try:
+            self.phase = "K_0"
+            self.initial = self._batch([x0])[0]
+            if method == "global":
+                self.global_(rng, popsize)
+                x0 = self.problem.x_of(self.evaluator.best.k)
+            for attempt in range(restarts + 1):
+                if attempt:
+                    lo, hi = np.array(self.problem.x_bounds).T
+                    x0 = rng.uniform(lo, hi)
+                converged = self.local(x0)
+                if self.evaluator.best.outcome.feasible:
+                    break
+        except BudgetExhausted:
+            self.budget_spent = True
+            converged = False
+        return converged
+
+    def result(self, method, converged, wall_time) -> OptimisationResult:
+        best = self.evaluator.best
+        feasible = best is not None and best.outcome.feasible
+        if best is None:
+            raise OptimisationError("max_evaluations: the budget does not allow a single evaluation")
+        if not feasible:
+            status = 2
+            what = "collides" if best.outcome.collided else (
+                "does not reach flat" if best.outcome.simulated else "fails to simulate")
+            message = (f"no collision-free K reaching flat found in {self.evaluator.nfev} "
+                       f"evaluations and {self.nstarts} start(s); the best K {what}")
+        elif converged:
+            status, message = 0, "collision-free and flat; local search converged"
+        else:
+            status = 1
+            message = ("collision-free and flat; stopped by the evaluation budget"
+                       if self.budget_spent else
+                       "collision-free and flat; local search stopped before converging")
+        return OptimisationResult(
+            k=best.k, c=best.c, best=best, initial=getattr(self, "initial", None),
+            problem=self.problem, success=feasible, status=status, message=message,
+            nfev=self.evaluator.nfev, nit=self.nit, nstarts=self.nstarts, method=method,
+            wall_time=wall_time, history=list(self.evaluator.history))

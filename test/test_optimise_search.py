@@ -1,0 +1,189 @@
+"""Stiffness optimisation machinery on closed-form stand-in evaluations.
+
+The stand-ins replace simulate + collision check by formulas in log10 k with
+a known optimum, so the search, restarts, groups, budget, parallel backends
+and error handling are checked exactly and fast. The real pipeline is
+exercised in test_optimise_pipeline.py.
+"""
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+from panel_deploy.errors import OptimisationError
+from panel_deploy.model import Body, Hinge, Model, box_inertia
+from panel_deploy.optimise import (Outcome, StiffnessProblem, evaluate, objective, optimise)
+from panel_deploy.scene import scene_from_dict
+
+A, T, MASS = 0.1, 0.005, 0.02
+
+
+def chain_model(n_bodies=4, k=0.1, beta=0.043, gravity=(0.0, 0.0, 0.0)):
+    """A row of unit panels hinged along their shared edges, zig-zag facets (a stowed stack)."""
+    size = np.array([A, A, T])
+    bodies = [Body(f"P{i}", ((1, i + 1),), size, MASS, box_inertia(MASS, size),
+                   np.array([i * A, 0.0, 0.0])) for i in range(n_bodies)]
+    hinges = []
+    for i in range(n_bodies - 1):
+        facet = "top" if i % 2 == 0 else "bottom"
+        z = T / 2 if facet == "top" else -T / 2
+        axis = np.array([0.0, -1.0, 0.0]) if facet == "top" else np.array([0.0, 1.0, 0.0])
+        y0 = A / 2 if facet == "top" else -A / 2
+        hinges.append(Hinge(f"h{i}", i, i + 1, np.array([(i + 0.5) * A, y0, z]), axis, A,
+                            facet, k, beta * k, math.pi, (((1, i + 1), (1, i + 2)),)))
+    return Model.build(bodies, hinges, 0, gravity=gravity)
+
+
+def scene(**optimisation):
+    data = {"array": {"rows": 1, "cols": 4, "length": A, "width": A, "thickness": T, "mass": MASS},
+            "optimisation": {"bounds": [0.001, 0.2], "k0": 0.1, **optimisation}}
+    return scene_from_dict(data)
+
+
+# Stand-in: clearance d peaks where log10 k = TARGET (per hinge), collision when
+# it would go negative, and a locked deployment when any k is below LOCK.
+TARGET = np.array([-1.5, -2.0, -1.2])
+LOCK = 0.002
+
+
+def bowl_outcome(model, settings):
+    u = np.log10(model.stiffness)
+    d = 0.05 - 0.02 * float(np.sum((u - TARGET) ** 2))
+    locked = bool(np.any(model.stiffness < LOCK))
+    if d <= 0:
+        return Outcome(collided=True, v=-d * 10, d=0.0, flat_residual=0.0,
+                       first_collision={"time": 0.3, "pair": ["P0", "P2"]})
+    return Outcome(collided=False, v=0.0, d=d, flat_residual=math.pi if locked else 0.0)
+
+
+def plateau_outcome(model, settings):
+    """Collides at one constant speed unless hinge 0 is soft: a flat plateau around K_0."""
+    k = model.stiffness
+    if k[0] > 0.01:
+        return Outcome(collided=True, v=0.5, d=0.0, flat_residual=0.0)
+    return Outcome(collided=False, v=0.0, d=0.03 - 0.01 * (np.log10(k[0]) + 2.5) ** 2,
+                   flat_residual=0.0)
+
+
+def test_objective_is_eq8_plus_flat_term():
+    o = Outcome(collided=True, v=0.2, d=0.0, flat_residual=0.0)
+    assert objective(o, 2.0, 10.0, 1.0) == pytest.approx(0.4)
+    o = Outcome(collided=False, v=0.0, d=0.01, flat_residual=0.01)
+    assert objective(o, 2.0, 10.0, 1.0) == pytest.approx(-0.1)        # flat: the paper's f
+    o = Outcome(collided=False, v=0.0, d=0.01, flat_residual=1.05)
+    assert objective(o, 2.0, 10.0, 3.0) == pytest.approx(-0.1 + 3.0)  # 1 rad past tolerance
+    failed = Outcome(collided=False, v=0.0, d=0.05, flat_residual=0.0, simulated=False)
+    assert objective(failed, 1.0, 10.0, 1.0) > objective(
+        Outcome(collided=True, v=3.0, d=0.0, flat_residual=math.pi), 1.0, 10.0, 1.0)
+
+
+def test_evaluate_makes_damping_follow_stiffness():
+    model = chain_model(k=0.1, beta=0.043)
+    k = np.array([0.01, 0.05, 0.2])
+    ev = evaluate(model, k, scene(), evaluation=bowl_outcome)
+    np.testing.assert_allclose(ev.c, 0.043 * k)
+    assert ev.f == pytest.approx(objective(bowl_outcome(model.with_stiffness(k), None), 1, 10, 1))
+    assert np.all(model.stiffness == 0.1)  # the base model is untouched
+
+
+def test_local_search_finds_the_known_optimum():
+    res = optimise(chain_model(), scene(), workers=1, evaluation=bowl_outcome)
+    assert res.success and res.status in (0, 1)
+    assert not res.outcome.collided and res.outcome.reached_flat
+    # The forward-difference step (0.05 decades) limits accuracy to about half a step.
+    np.testing.assert_allclose(np.log10(res.k), TARGET, atol=0.05)
+    assert res.f < res.initial.f
+    assert res.nfev == len(res.history) <= scene().optimisation.max_evaluations
+    np.testing.assert_allclose(res.c, 0.043 * res.k)
+
+
+def test_groups_share_one_stiffness():
+    res = optimise(chain_model(), scene(), workers=1, evaluation=bowl_outcome,
+                   groups=[["h0", "h2"]])
+    assert res.k[0] == res.k[2]
+    assert res.problem.groups == ((0, 2), (1,))
+    # Best shared value is the mean of the two targets in log k.
+    assert np.log10(res.k[0]) == pytest.approx((TARGET[0] + TARGET[2]) / 2, abs=0.05)
+
+
+def test_restart_leaves_a_colliding_plateau():
+    res = optimise(chain_model(), scene(restarts=5, seed=3), workers=1, evaluation=plateau_outcome)
+    assert res.initial.outcome.collided  # K_0 collides, and the gradient there is zero
+    assert res.nstarts > 1
+    assert res.success and res.k[0] <= 0.01
+
+
+def test_no_feasible_point_is_reported_not_raised():
+    res = optimise(chain_model(), scene(restarts=1, bounds=[0.05, 0.2], k0=0.1), workers=1,
+                   evaluation=plateau_outcome)
+    assert not res.success and res.status == 2 and res.nstarts == 2
+    assert "collides" in res.message
+
+
+def test_global_search_finds_the_known_optimum():
+    res = optimise(chain_model(), scene(method="global", max_evaluations=150, seed=1), workers=1,
+                   evaluation=bowl_outcome)
+    assert res.success and res.method == "global"
+    np.testing.assert_allclose(np.log10(res.k), TARGET, atol=0.1)
+    assert res.nfev <= 150
+
+
+def test_budget_is_respected():
+    res = optimise(chain_model(), scene(max_evaluations=9), workers=1, evaluation=bowl_outcome)
+    assert res.nfev <= 9 and res.status in (1, 2)
+    assert "budget" in res.message or not res.success
+
+
+def test_progress_reports_every_batch():
+    seen = []
+    res = optimise(chain_model(), scene(max_evaluations=30), workers=1, evaluation=bowl_outcome,
+                   progress=seen.append)
+    assert seen and seen[-1].nfev == res.nfev
+    assert [p.nfev for p in seen] == sorted(p.nfev for p in seen)
+    assert all(p.elapsed >= 0 and p.phase for p in seen)
+    assert seen[-1].best_f == pytest.approx(res.f)
+
+
+def test_process_pool_gives_the_serial_result():
+    serial = optimise(chain_model(), scene(max_evaluations=40), workers=1, evaluation=bowl_outcome)
+    pooled = optimise(chain_model(), scene(max_evaluations=40), workers=2, evaluation=bowl_outcome)
+    np.testing.assert_array_equal(pooled.k, serial.k)
+    assert [e.f for e in pooled.history] == [e.f for e in serial.history]
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"bounds": (0.2, 0.001)}, "bounds"),
+    ({"bounds": (0.0, 0.2)}, "bounds"),
+    ({"bounds": (0.1, 0.1)}, "bounds"),
+    ({"k0": 0.5}, "k0"),
+    ({"k0": [0.1, 0.1]}, "k0"),
+    ({"groups": [["h0"], []]}, "groups[1]"),
+    ({"groups": [["h0", "nope"]]}, "groups[0]"),
+    ({"groups": [[0, 1], [1, 2]]}, "groups[1]"),
+    ({"groups": [[7]]}, "groups[0]"),
+])
+def test_bad_problem_names_the_field(kwargs, field):
+    model = chain_model()
+    args = {"bounds": (0.001, 0.2), "k0": 0.1, **kwargs}
+    with pytest.raises(OptimisationError, match="^" + re.escape(field) + ": "):
+        StiffnessProblem.from_model(model, args["bounds"], args["k0"], args.get("groups"))
+
+
+def test_bad_options_raise_before_any_evaluation():
+    # A scene built in code skips load_scene's validation; optimise checks again.
+    s = scene()
+    bad = s.replace(optimisation=type(s.optimisation)(bounds=(0.2, 0.001), k0=0.1))
+    with pytest.raises(OptimisationError, match="^bounds: "):
+        optimise(chain_model(), bad, workers=1, evaluation=bowl_outcome)
+    for kwargs, field in (({"workers": -1}, "workers"), ({"method": "newton"}, "method"),
+                          ({"max_evaluations": 0}, "max_evaluations"), ({"fd_step": 0}, "fd_step")):
+        with pytest.raises(OptimisationError, match=f"^{field}: "):
+            optimise(chain_model(), s, evaluation=bowl_outcome, **kwargs)
+
+
+def test_unreachable_scheduler_is_a_clear_error():
+    # Port 9 (discard) on loopback: nothing listens, the connect times out quickly.
+    with pytest.raises(OptimisationError, match="^dask_address: cannot reach"):
+        optimise(chain_model(), scene(), dask_address="tcp://127.0.0.1:9", evaluation=bowl_outcome)

@@ -128,6 +128,10 @@ class FoldDesign:
     merges : tuple of Merge
     dof_cells, dof_bodies : int
         Spatial Kutzbach mobility before and after merging.
+    ground : Cell or None
+        The cell held at the identity in :attr:`stowed` (the ground panel).
+    refused : tuple of Merge
+        Requested or candidate merges that were not made, each with the reason.
     """
 
     rows: int
@@ -141,3 +145,5 @@ class FoldDesign:
     merges: tuple
     dof_cells: int
     dof_bodies: int
+    ground: Cell | None = None
+    refused: tuple = ()

@@ -1,0 +1,10 @@
+"""Deployment dynamics of a panel array: compiled recursive multibody kernels,
+penalty or exact loop closure, scipy or compiled integrators.
+
+``simulate(model, settings, state=None) -> SimulationResult``.
+"""
+
+from .result import SimulationResult
+from .simulate import default_gap_limit, simulate
+
+__all__ = ["SimulationResult", "simulate", "default_gap_limit"]

@@ -1,0 +1,322 @@
+"""Time integrators behind one interface: scipy's OdeSolver classes, or a
+Dormand-Prince 5(4) whose whole adaptive loop is compiled with numba.
+
+Both sample the state at given instants t_j (scipy by dense output, the compiled
+loop by stepping exactly onto them), stop explicitly on failure, and can locate
+the contact switches (a tree hinge crossing theta = 0 or pi, where Eq. 4 changes
+the torque law) so that no step straddles one: a step that crosses a switch is
+redone to end on it. Switches in the first or last 0.1 % of a step are left
+alone (the step is already at the switch). Cut-hinge angles are not state
+variables, so their switches are not located.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
+from scipy.optimize import brentq
+
+from . import kernels
+
+SCIPY_METHODS = {"RK23": RK23, "RK45": RK45, "DOP853": DOP853, "Radau": Radau,
+                 "BDF": BDF, "LSODA": LSODA}
+IMPLICIT = ("Radau", "BDF", "LSODA")
+#: Switches closer than this fraction of a step to either end are not relocated.
+EDGE = 1e-3
+
+
+@dataclass
+class Integration:
+    """Raw output of an integrator.
+
+    ``y`` (s_done, N) holds the samples reached; ``status`` 0 = t_end reached,
+    -1 = failure with ``message``.
+    """
+
+    y: np.ndarray
+    status: int
+    message: str
+    nfev: int
+    njev: int
+    nlu: int
+    nsteps: int
+    nswitches: int
+
+
+# --- switch location (shared by both integrators) ---
+
+@njit(cache=True)
+def _modes(theta):
+    out = np.empty(theta.shape[0], dtype=np.int64)
+    for i in range(theta.shape[0]):
+        out[i] = kernels.contact_mode(theta[i])
+    return out
+
+
+@njit(cache=True)
+def _boundary(m_old, m_new):
+    return 0.0 if min(m_old, m_new) == 0 else math.pi
+
+
+@njit(cache=True)
+def _hermite(th0, w0, th1, w1, h, s):
+    """Cubic Hermite interpolant of theta at fraction s of a step of length h."""
+    s2 = s * s
+    s3 = s2 * s
+    return ((2 * s3 - 3 * s2 + 1) * th0 + (s3 - 2 * s2 + s) * h * w0
+            + (-2 * s3 + 3 * s2) * th1 + (s3 - s2) * h * w1)
+
+
+@njit(cache=True)
+def first_switch(n, y0, y1, h):
+    """Fraction of the step (0..1) at which the first tree hinge changes contact
+    mode, by bisection on the cubic Hermite interpolant of theta; 2.0 if none."""
+    m0 = _modes(y0[:n])
+    m1 = _modes(y1[:n])
+    best = 2.0
+    for i in range(n):
+        if m0[i] == m1[i]:
+            continue
+        b = _boundary(m0[i], m1[i])
+        g0 = y0[i] - b
+        lo, hi = 0.0, 1.0
+        for _ in range(50):
+            mid = 0.5 * (lo + hi)
+            g = _hermite(y0[i], y0[n + i], y1[i], y1[n + i], h, mid) - b
+            if (g > 0) == (g0 > 0):
+                lo = mid
+            else:
+                hi = mid
+        best = min(best, hi)
+    return best
+
+
+@njit(cache=True)
+def max_gap(P, y):
+    """Largest loop-closure gap at state y, m."""
+    n = P.n
+    R, p, w, vo, S = kernels.kinematics(P, y[:n], y[n:2 * n])
+    pts, gap, rate = kernels.cut_geometry(P, R, p, w, vo)
+    out = 0.0
+    for j in range(gap.shape[0]):
+        for e in range(2):
+            out = max(out, math.sqrt(gap[j, e] @ gap[j, e]))
+    return out
+
+
+# --- compiled Dormand-Prince 5(4) ---
+
+_C = np.array([0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0])
+_A = np.array([
+    [0.0, 0.0, 0.0, 0.0, 0.0],
+    [1 / 5, 0.0, 0.0, 0.0, 0.0],
+    [3 / 40, 9 / 40, 0.0, 0.0, 0.0],
+    [44 / 45, -56 / 15, 32 / 9, 0.0, 0.0],
+    [19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729, 0.0],
+    [9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656],
+])
+_B = np.array([35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84])
+_E = np.array([71 / 57600, 0.0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40])
+
+
+@njit(cache=True)
+def _rms_norm(e, y0, y1, rtol, atol):
+    s = 0.0
+    for i in range(e.shape[0]):
+        sc = atol + rtol * max(abs(y0[i]), abs(y1[i]))
+        s += (e[i] / sc) ** 2
+    return math.sqrt(s / e.shape[0])
+
+
+@njit(cache=True)
+def dopri5(P, y0, t_eval, rtol, atol, max_step, locate, max_steps, gap_limit):
+    """Adaptive Dormand-Prince 5(4) (scipy RK45's tableau and step control),
+    stepping exactly onto every t_eval[j].
+
+    Returns (Y, status, code, nfev, nsteps, nswitches); Y rows past a failure
+    are NaN and cut off by the caller. code: 0 ok, 1 step collapse, 2
+    non-finite state, 3 gap above gap_limit, 4 max_steps.
+    """
+    N = y0.shape[0]
+    n = P.n
+    s = t_eval.shape[0]
+    Y = np.full((s, N), np.nan)
+    Y[0] = y0
+    y = y0.copy()
+    t = t_eval[0]
+    f = kernels.rhs(P, y)
+    nfev = 1
+    # Hairer, Norsett & Wanner (II.4) starting step
+    sc = np.empty(N)
+    for i in range(N):
+        sc[i] = atol + rtol * abs(y[i])
+    d0 = math.sqrt(np.mean((y / sc) ** 2))
+    d1 = math.sqrt(np.mean((f / sc) ** 2))
+    h = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+    h = min(h, max_step)
+    K = np.empty((7, N))
+    nsteps = 0
+    nswitches = 0
+    j = 1
+    while j < s:
+        if not np.all(np.isfinite(f)):
+            return Y, -1, 2, nfev, nsteps, nswitches
+        target = t_eval[j]
+        step = min(h, max_step, target - t)
+        lands = step == target - t
+        K[0] = f
+        for st in range(1, 6):
+            yi = y.copy()
+            for q in range(st):
+                yi += step * _A[st, q] * K[q]
+            K[st] = kernels.rhs(P, yi)
+        y1 = y.copy()
+        for q in range(6):
+            y1 += step * _B[q] * K[q]
+        K[6] = kernels.rhs(P, y1)
+        nfev += 6
+        err = np.zeros(N)
+        for q in range(7):
+            err += step * _E[q] * K[q]
+        en = _rms_norm(err, y, y1, rtol, atol)
+        if not math.isfinite(en):
+            h = 0.2 * step
+        elif en > 1.0:
+            h = step * max(0.2, 0.9 * en ** -0.2)
+        else:
+            frac = first_switch(n, y, y1, step) if locate else 2.0
+            if EDGE < frac < 1.0 - EDGE:
+                h = frac * step
+                nswitches += 1
+                if nswitches >= max_steps:
+                    return Y, -1, 4, nfev, nsteps, nswitches
+                continue
+            t = target if lands else t + step
+            y = y1
+            f = K[6].copy()
+            nsteps += 1
+            if lands:
+                Y[j] = y
+                j += 1
+            if gap_limit > 0.0 and max_gap(P, y) > gap_limit:
+                return Y, -1, 3, nfev, nsteps, nswitches
+            if nsteps >= max_steps:
+                return Y, -1, 4, nfev, nsteps, nswitches
+            h = step * min(10.0, 0.9 * en ** -0.2) if en > 0 else 10.0 * step
+        if h < 10.0 * np.finfo(np.float64).eps * max(1.0, abs(t)):
+            return Y, -1, 1, nfev, nsteps, nswitches
+    return Y, 0, 0, nfev, nsteps, nswitches
+
+
+_CODES = {1: "step size collapsed", 2: "non-finite state or derivative",
+          3: "loop-closure gap exceeded the limit", 4: "step budget exhausted"}
+
+
+def integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit) -> Integration:
+    Y, status, code, nfev, nsteps, nsw = dopri5(
+        P, y0, t_eval, settings.rtol, settings.atol, settings.max_step, settings.events,
+        max_steps, gap_limit)
+    done = int(np.all(np.isfinite(Y), axis=1).cumprod().sum())
+    msg = "reached t_end" if status == 0 else (
+        f"{_CODES[code]} at t = {t_eval[done - 1]:.6g} s (last sample); integration stopped")
+    return Integration(Y[:done], status, msg, nfev, 0, 0, nsteps, nsw)
+
+
+# --- scipy OdeSolver driver ---
+
+def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit) -> Integration:
+    """Drive a scipy OdeSolver step by step, sampling by dense output.
+
+    A step that crosses a contact switch (when ``settings.events``) is
+    discarded and redone by a new solver started at the step's beginning with
+    ``t_bound`` at the switch; then a new solver continues from the switch.
+    """
+    cls = SCIPY_METHODS[settings.method]
+    n = P.n
+    counts = {"nfev": 0, "njev": 0}
+
+    def fun(t, y):
+        counts["nfev"] += 1
+        return kernels.rhs(P, y)
+
+    def jac(t, y):
+        counts["njev"] += 1
+        return kernels.rhs_jacobian(P, y, kernels.rhs(P, y))
+
+    opts = dict(rtol=settings.rtol, atol=settings.atol, max_step=settings.max_step)
+    if settings.method in IMPLICIT:
+        opts["jac"] = jac
+
+    t_end = t_eval[-1]
+    out = [y0]
+    j = 1
+    nsteps = nlu = nsw = 0
+    status, message = 0, "reached t_end"
+    t, y, bound = t_eval[0], y0, t_end
+    solver = cls(fun, t, y, bound, **opts)
+    while j < len(t_eval):
+        if solver.status == "finished":
+            nlu += getattr(solver, "nlu", 0)
+            t, y, bound = solver.t, solver.y, t_end
+            solver = cls(fun, t, y, bound, **opts)
+            continue
+        t_old, y_old = solver.t, solver.y.copy()
+        msg = solver.step()
+        if solver.status == "failed":
+            status, message = -1, f"{settings.method} failed at t = {t_old:.6g} s: {msg}"
+            break
+        y_new = solver.y
+        if not np.all(np.isfinite(y_new)):
+            status, message = -1, f"non-finite state at t = {solver.t:.6g} s"
+            break
+        nsteps += 1
+        if settings.events:
+            frac = first_switch(n, y_old, y_new, solver.t - t_old)
+            if EDGE < frac < 1.0 - EDGE and nsw < max_steps:
+                dt = solver.t - t_old
+                t_sw = _refine_switch(solver.dense_output(), n, y_old, y_new, t_old, solver.t, frac)
+                if EDGE * dt < t_sw - t_old < (1.0 - EDGE) * dt:
+                    nsw += 1
+                    nlu += getattr(solver, "nlu", 0)
+                    solver = cls(fun, t_old, y_old, t_sw, **opts)
+                    continue
+        sol = solver.dense_output()
+        while j < len(t_eval) and t_eval[j] <= solver.t:
+            out.append(sol(t_eval[j]))
+            j += 1
+        if gap_limit > 0 and max_gap(P, solver.y) > gap_limit:
+            status, message = -1, (f"loop-closure gap {max_gap(P, solver.y):.3g} m exceeded "
+                                   f"the limit {gap_limit:.3g} m at t = {solver.t:.6g} s")
+            break
+        if nsteps >= max_steps:
+            status, message = -1, f"step budget ({max_steps}) exhausted at t = {solver.t:.6g} s"
+            break
+    nlu += getattr(solver, "nlu", 0)
+    Y = np.array(out)
+    finite = np.all(np.isfinite(Y), axis=1).cumprod().astype(bool)
+    return Integration(Y[finite], status, message, counts["nfev"], counts["njev"], nlu,
+                       nsteps, nsw)
+
+
+def _refine_switch(sol, n, y_old, y_new, t_old, t_new, frac):
+    """Switch time from the solver's own dense output (better than the Hermite guess)."""
+    m0 = _modes(y_old[:n])
+    m1 = _modes(y_new[:n])
+    best = t_old + frac * (t_new - t_old)
+    for i in np.flatnonzero(m0 != m1):
+        b = _boundary(m0[i], m1[i])
+        g = lambda t: sol(t)[i] - b  # noqa: E731
+        if np.sign(g(t_old)) != np.sign(g(t_new)):
+            best = min(best, brentq(g, t_old, t_new, xtol=1e-14))
+    return best
+
+
+def integrate(P, y0, t_eval, settings, max_steps, gap_limit) -> Integration:
+    """Integrate the packed model from y0, sampling at t_eval (see module docstring)."""
+    if settings.method == "compiled":
+        return integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit)
+    return integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit)

@@ -1,0 +1,59 @@
+"""Hand-built models for the dynamics tests (closed forms need small, known models)."""
+
+import numpy as np
+
+from panel_deploy.model import Body, ClosureParameters, Hinge, Model, box_inertia
+
+A, B, T, MASS = 0.1, 0.1, 0.005, 0.02
+SIZE = np.array([A, B, T])
+
+
+def panel(name, x, y, mass=MASS):
+    return Body(name, (), SIZE.copy(), mass, box_inertia(mass, SIZE), np.array([x, y, 0.0]))
+
+
+def hinge(name, a, b, point, axis, k=0.1, c=0.0043, theta_stowed=np.pi, length=B):
+    axis = np.asarray(axis, float)
+    return Hinge(name, a, b, np.asarray(point, float), axis / np.linalg.norm(axis), length,
+                 "top", k, c, theta_stowed, ())
+
+
+def plate_on_hinge(k=0.1, c=0.0043, gravity=(0.0, 0.0, 0.0), k_s=1000.0, c_s=0.5):
+    """Ground panel and one panel hinged on their shared edge x = A/2, top facet."""
+    bodies = [panel("G", 0.0, 0.0), panel("P", A, 0.0)]
+    hinges = [hinge("h", 0, 1, (A / 2, B / 2, T / 2), (0, -1, 0), k, c)]
+    return Model.build(bodies, hinges, 0, k_s=k_s, c_s=c_s, gravity=gravity)
+
+
+def random_branched(seed=0, closure="penalty", gravity=(0.3, -9.81, 1.0)):
+    """Six bodies with random geometry and inertia: a branched tree plus one loop."""
+    rng = np.random.default_rng(seed)
+    bodies = []
+    for i in range(6):
+        m = rng.uniform(0.01, 0.05)
+        X = rng.normal(size=(3, 3))
+        inertia = 1e-5 * (X @ X.T + np.eye(3))
+        bodies.append(Body(f"b{i}", (), SIZE.copy(), m, inertia, rng.uniform(-0.2, 0.2, 3)))
+    edges = [(0, 1), (1, 2), (1, 3), (0, 4), (4, 5), (2, 5)]
+    hinges = [hinge(f"h{a}{b}", a, b, rng.uniform(-0.2, 0.2, 3), rng.normal(size=3),
+                    k=rng.uniform(0.05, 0.2), c=rng.uniform(0.001, 0.01))
+              for a, b in edges]
+    cl = ClosureParameters(closure, 1e4, 30.0, 2e4, 20.0, 1e-3, 1e-10)
+    return Model.build(bodies, hinges, 0, k_s=500.0, c_s=0.3, closure=cl, gravity=gravity)
+
+
+def ring_2x2(closure="penalty", k_M=1e6, c_M=280.0, baumgarte=1e-3, k_h=(0.1, 0.05)):
+    """Four unit panels in a ring (cells (1,1), (1,2), (2,2), (2,1)), all hinges on the
+    top facet, ground (1,1); the hinge (2,1)-(2,2) is cut. The two horizontal hinges have
+    different stiffness k_h so the loop carries a force at the cut."""
+    bodies = [panel("11", -A / 2, B / 2), panel("12", A / 2, B / 2),
+              panel("22", A / 2, -B / 2), panel("21", -A / 2, -B / 2)]
+    top = T / 2
+    hinges = [
+        hinge("v1", 0, 1, (0, B, top), (0, -1, 0), theta_stowed=0.0),
+        hinge("h2", 1, 2, (0, 0, top), (1, 0, 0), k=k_h[1]),
+        hinge("v2", 3, 2, (0, 0, top), (0, -1, 0), theta_stowed=0.0),
+        hinge("h1", 0, 3, (-A, 0, top), (1, 0, 0), k=k_h[0]),
+    ]
+    cl = ClosureParameters(closure, k_M, c_M, k_M, c_M, baumgarte, 1e-10)
+    return Model.build(bodies, hinges, 0, cut_hinges=[2], k_s=1000.0, c_s=0.5, closure=cl)

@@ -269,7 +269,11 @@ class OptimisationSection:
 
 @dataclass(frozen=True)
 class Scene:
-    """A validated scene. ``source`` is the file it came from, if any."""
+    """A validated scene.
+
+    ``source`` is the file it came from, if any; ``data`` the mapping it was
+    validated from (what a saved trajectory stores to rebuild the model).
+    """
 
     array: ArraySection
     fold: FoldSection = FoldSection()
@@ -283,6 +287,7 @@ class Scene:
     name: str = ""
     description: str = ""
     source: str | None = None
+    data: dict = field(default=None, compare=False, repr=False)
 
     def replace(self, **sections) -> "Scene":
         return replace(self, **sections)
@@ -352,7 +357,7 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
         if key in data and not isinstance(data[key], str):
             raise SceneError(key, f"expected a string, got {_type_name(data[key])}")
     return Scene(**sections, gravity=gravity, name=data.get("name", ""),
-                 description=data.get("description", ""), source=source)
+                 description=data.get("description", ""), source=source, data=data)
 
 
 def load_scene(path) -> Scene:

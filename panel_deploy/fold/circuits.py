@@ -355,6 +355,12 @@ def circuit_by_index(rows: int, cols: int, index: int) -> tuple[Cell, ...]:
     for i, circ in enumerate(circuits(rows, cols)):
         if i == index:
             return circ
+    if _has_no_circuit(rows, cols):
+        raise DesignError(
+            f"the {rows} x {cols} array has no Hamiltonian circuit: "
+            + ("it has a single row or column" if min(rows, cols) < 2 else
+               "its cell count is odd, and a circuit of a chessboard alternates colours")
+        )
     raise DesignError(
         f"circuit index {index} out of range: the {rows} x {cols} array has "
         f"{count_circuits(rows, cols)} circuits (indices 0..{count_circuits(rows, cols) - 1})"

@@ -403,9 +403,6 @@ def find_stowed_state(
     """
     circuit = validate_circuit(rows, cols, circuit)
     ground = circuit[0] if ground is None else check_cell(ground, rows, cols)
-    n = len(circuit)
-    if n % 2:
-        return None, f"{n} cells cannot fill two equal stacks (odd cell count)"
     geo = _Geometry(rows, cols)
     walk = _walk(circuit, ground)
     stats = Counter()

@@ -1,0 +1,117 @@
+"""Merging, Kutzbach DoF, design(), reports, CLI command and plot."""
+
+import argparse
+import json
+
+import pytest
+
+from panel_deploy.errors import DesignError
+from panel_deploy.fold import assembly_dof, design, designs, kutzbach_dof
+from panel_deploy.fold.report import design_dict, design_text, fold_command
+
+PAPER = [(1, 2), (1, 1), (2, 1), (3, 1), (4, 1), (4, 2), (3, 2), (2, 2),
+         (2, 3), (3, 3), (4, 3), (4, 4), (3, 4), (2, 4), (1, 4), (1, 3)]
+
+
+def test_kutzbach():
+    assert kutzbach_dof(16, 16) == 10
+    assert kutzbach_dof(12, 12) == 6
+    with pytest.raises(DesignError):
+        kutzbach_dof(0, 1)
+
+
+def test_paper_merges_and_dof():
+    d = design(4, 4, PAPER)
+    assert d.ground == (1, 2)
+    assert (d.dof_cells, d.dof_bodies, len(d.bodies)) == (10, 6, 12)
+    assert {m.cells for m in d.merges} == {((r, 2), (r, 3)) for r in range(1, 5)}
+    kinds = {m.cells: m.reason for m in d.merges}
+    assert "flat hinge" in kinds[((1, 2), (1, 3))] and "layer 0" in kinds[((1, 2), (1, 3))]
+    assert "slit" in kinds[((3, 2), (3, 3))]
+    assert d.refused == ()
+    # L4-L3 and L3-L2 are two collinear segments each, counted once.
+    assert assembly_dof(d.bodies, d.hinges) == 6
+
+
+def test_merge_none_and_explicit():
+    d = design(4, 4, PAPER, merge="none")
+    assert len(d.bodies) == 16 and d.dof_bodies == 10 and d.merges == ()
+    d = design(4, 4, PAPER, merge=[((3, 3), (3, 2)), ((1, 1), (1, 2))])
+    assert [m.cells for m in d.merges] == [((3, 2), (3, 3))]
+    assert len(d.refused) == 1 and "layers 1 and 0" in d.refused[0].reason
+    assert len(d.bodies) == 15
+    with pytest.raises(DesignError, match="share an edge"):
+        design(4, 4, PAPER, merge=[((1, 1), (2, 2))])
+    with pytest.raises(DesignError):
+        design(4, 4, PAPER, merge="all")
+
+
+def test_merged_hinges_are_single_lines():
+    for _, d in designs(4, 6):
+        if d.stowed is None:
+            assert len(d.bodies) == 24 and d.reason
+            continue
+        owner = {c: i for i, b in enumerate(d.bodies) for c in b}
+        lines = {}
+        for u, v in d.hinges:
+            i, j = owner[u], owner[v]
+            if i == j:
+                assert d.stowed.hinges[(u, v)].angle == 0
+                continue
+            h = d.stowed.hinges[(u, v)]
+            line = ("v", min(u[1], v[1])) if u[0] == v[0] else ("h", min(u[0], v[0]))
+            lines.setdefault((min(i, j), max(i, j)), set()).add((line, h.facet, h.angle))
+        assert all(len(s) == 1 for s in lines.values())
+        assert d.dof_bodies == kutzbach_dof(len(d.bodies), len(lines))
+        for b in d.bodies:
+            motions = {(d.stowed.placements[c].rotation, d.stowed.placements[c].offset) for c in b}
+            assert len(motions) == 1
+
+
+def test_design_errors():
+    with pytest.raises(DesignError, match="out of range"):
+        design(4, 4, 6)
+    with pytest.raises(DesignError, match="odd"):
+        design(3, 3, 0)
+    with pytest.raises(DesignError, match="do not share an edge"):
+        design(4, 4, PAPER[::2] + PAPER[1::2])
+    with pytest.raises(DesignError):
+        design(4, 4, "abc")
+
+
+def test_reports():
+    d = design(4, 4, PAPER)
+    js = design_dict(d, 2)
+    json.dumps(js)
+    assert js["stacks"][0][0] == [1, 2] and js["stacks"][0][-1] == [2, 2]
+    assert js["dof_cells"] == 10 and js["dof_bodies"] == 6 and js["packs"]
+    folded = [h for h in js["hinges"] if h["folded"]]
+    assert len(folded) == 14 and {h["facet"] for h in folded} == {"top", "bottom"}
+    text = design_text(d, 2)
+    assert "stack 0: (1,2) (1,1)" in text and "DoF 10 (cells) -> 6 (bodies)" in text
+
+
+def _args(**kw):
+    base = dict(rows=4, cols=4, scene=None, json=False, plot=None, circuit=None, limit=50)
+    base.update(kw)
+    return argparse.Namespace(**base)
+
+
+def test_fold_command(capsys, tmp_path):
+    assert fold_command(_args()) == 0
+    out = capsys.readouterr().out
+    assert "6 Hamiltonian circuits" in out and "6 pack" in out
+    assert fold_command(_args(cols=6, json=True, limit=3)) == 0
+    js = json.loads(capsys.readouterr().out)
+    assert js["circuits"] == 37 and js["packable"] == 29 and len(js["listed"]) == 3
+    png = tmp_path / "d.png"
+    assert fold_command(_args(circuit=2, plot=str(png))) == 0
+    assert png.stat().st_size > 10000
+    assert "verdict: packs into two stacks" in capsys.readouterr().out
+    assert fold_command(_args(circuit=99)) == 2
+    assert "out of range" in capsys.readouterr().err
+    assert fold_command(_args(cols=6, circuit=5)) == 1
+    capsys.readouterr()
+    assert fold_command(_args(rows=8, cols=8, limit=2, json=True)) == 0
+    js = json.loads(capsys.readouterr().out)
+    assert js["circuits"] == 4638576 and js["packable"] is None and len(js["listed"]) == 2

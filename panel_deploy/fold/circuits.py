@@ -25,8 +25,8 @@ from ..errors import DesignError
 from .design import Cell
 from .grid import are_adjacent, check_cell, check_size, edge
 
-#: Largest number of cells for which orbit counting by enumeration is offered
-#: without an explicit opt-in (6 x 6 enumerates in about a second).
+#: Largest array, in cells, whose circuits reports enumerate and check in full
+#: (orbit and packable counts); larger arrays are counted by the DP only.
 ENUMERATION_LIMIT = 36
 
 

@@ -54,7 +54,7 @@ def bowl_outcome(model, settings):
     locked = bool(np.any(model.stiffness < LOCK))
     if d <= 0:
         return Outcome(collided=True, v=-d * 10, d=0.0, flat_residual=0.0,
-                       first_collision={"time": 0.3, "pair": ["P0", "P2"]})
+                       first_collision={"t": 0.3, "pair": ["P0", "P2"]})
     return Outcome(collided=False, v=0.0, d=d, flat_residual=math.pi if locked else 0.0)
 
 

@@ -21,6 +21,9 @@ from ..errors import OptimisationError
 #: the same 0.05 rad the dynamics' release report uses for "reached flat".
 FLAT_TOLERANCE = 0.05
 
+#: Fraction of the run, at its end, over which the flat residual is taken.
+FLAT_WINDOW = 0.1
+
 #: Approach speed (m/s) charged to a run whose simulation failed: faster than
 #: any approach seen in the paper scene (tip speeds stay below ~3 m/s), so a
 #: failure always scores worse than a collision, yet finite for the solvers.
@@ -40,9 +43,10 @@ class Outcome:
     d : float
         Smallest proximal distance over the valid trajectory, m.
     flat_residual : float
-        Largest |theta| over the hinges at the last sample, rad.
+        Largest |theta| over the hinges and over the last
+        :data:`FLAT_WINDOW` of the samples, rad.
     first_collision : dict or None
-        ``time`` (s), ``pair`` (two body names) and whatever else the
+        ``t`` (s), ``pair`` (two body names) and whatever else the
         collision check reports, as plain YAML-able values.
     simulated : bool
         The simulation reached the end time (``SimulationResult.success``).
@@ -96,7 +100,7 @@ def objective(outcome: Outcome, p: float, q: float, flat_weight: float) -> float
     """Score of one run: the paper's Eq. (8) plus a flat term.
 
     ``f = p v - q d + flat_weight * max(0, r - FLAT_TOLERANCE)`` with ``r``
-    the largest hinge angle left at the end time (rad). Eq. (8) cannot see a
+    the largest hinge angle over the last tenth of the run (rad). Eq. (8) cannot see a
     deployment that locks (a hinge that never leaves its stowed angle may
     keep all panels far apart, which Eq. (8) rewards); the flat term charges
     it in proportion to how far from flat it stays, and vanishes for every
@@ -111,6 +115,17 @@ def objective(outcome: Outcome, p: float, q: float, flat_weight: float) -> float
         return p * FAILED_SPEED + flat_weight * math.pi
     return (p * outcome.v - q * outcome.d
             + flat_weight * max(0.0, outcome.flat_residual - FLAT_TOLERANCE))
+
+
+def plain(value):
+    """``value`` with numpy scalars and arrays turned into Python numbers and lists."""
+    if isinstance(value, dict):
+        return {str(k): plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
 
 
 def damping_ratio(model) -> np.ndarray:
@@ -140,13 +155,17 @@ def run_deployment(model, settings) -> Outcome:
     start = time.perf_counter()
     result = simulate(model, settings.simulation)
     report = check_trajectory(model, result, settings.collision)
-    theta_end = np.asarray(result.theta)[-1] if len(result.t) else model.theta_stowed
+    theta = np.asarray(result.theta) if len(result.t) else model.theta_stowed[None, :]
+    # The last tenth of the run, not only the last sample: a lightly damped
+    # panel swinging through flat at t_end must not count as flat.
+    window = theta[-max(2, math.ceil(FLAT_WINDOW * len(theta))):]
     return Outcome(
         collided=report.collided,
         v=float(report.v),
-        d=float(report.d),
-        flat_residual=float(np.max(np.abs(theta_end), initial=0.0)),
-        first_collision=report.first_collision_dict() if report.collided else None,
+        # d is inf when no pair can collide; no clearance is then earned.
+        d=float(report.d) if math.isfinite(report.d) else 0.0,
+        flat_residual=float(np.max(np.abs(window), initial=0.0)),
+        first_collision=plain(report.first_collision_dict()) if report.collided else None,
         simulated=bool(result.success),
         message=result.message,
         wall_time=time.perf_counter() - start)

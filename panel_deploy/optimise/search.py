@@ -112,8 +112,8 @@ class OptimisationResult:
 
 
 def optimise(model, settings, *, workers=None, dask_address=None, progress: Callable | None = None,
-             groups=None, method=None, max_evaluations=None, restarts=None, seed=None,
-             fd_step=0.05, popsize=2, evaluation=run_deployment) -> OptimisationResult:
+             groups=None, k0=None, method=None, max_evaluations=None, restarts=None, seed=None,
+             fd_step=0.05, patience=3, popsize=2, evaluation=run_deployment) -> OptimisationResult:
     """Choose hinge stiffnesses K so that the array deploys without collision.
 
     Minimises f(K) of :func:`~panel_deploy.optimise.evaluate.objective`
@@ -137,10 +137,16 @@ def optimise(model, settings, *, workers=None, dask_address=None, progress: Call
         Called with a :class:`Progress` after every batch of evaluations.
     groups : sequence of sequence of (int or str), optional
         Override ``model.metadata["hinge_groups"]``.
+    k0 : float or (n_groups,) array_like, optional
+        Starting stiffness (N m/rad), one value or one per group; default
+        the scene's ``optimisation.k0``.
     method, max_evaluations, restarts, seed : optional
         Override the scene's values.
     fd_step : float
         Forward-difference step in log10 k (see the module docstring).
+    patience : int
+        Iterations a local search may spend while every K seen so far
+        collides before it restarts from a new K_0.
     popsize : int
         Differential evolution population per variable (global method).
     evaluation : callable
@@ -165,14 +171,17 @@ def optimise(model, settings, *, workers=None, dask_address=None, progress: Call
     for name, value, low in (("max_evaluations", max_evaluations, 1), ("restarts", restarts, 0)):
         if not isinstance(value, int) or isinstance(value, bool) or value < low:
             raise OptimisationError(f"{name}: expected an integer >= {low}, got {value!r}")
+    if not isinstance(patience, int) or patience < 1:
+        raise OptimisationError(f"patience: expected an integer >= 1, got {patience!r}")
     if not fd_step > 0:
         raise OptimisationError(f"fd_step: expected a step > 0 in log10 k, got {fd_step!r}")
-    problem = StiffnessProblem.from_model(model, opt.bounds, opt.k0, groups)
+    problem = StiffnessProblem.from_model(model, opt.bounds, opt.k0 if k0 is None else k0,
+                                          groups)
     damping_ratio(model)  # fail now, not in a worker, if c/k is unknown
     rng = np.random.default_rng(opt.seed if seed is None else seed)
     backend = make_backend(Job(model, settings, evaluation),
                            opt.workers if workers is None else workers, dask_address)
-    search = _Search(problem, backend, max_evaluations, progress, fd_step)
+    search = _Search(problem, backend, max_evaluations, progress, fd_step, patience)
     start = time.perf_counter()
     try:
         converged = search.run(method, restarts, rng, popsize)
@@ -184,8 +193,9 @@ def optimise(model, settings, *, workers=None, dask_address=None, progress: Call
 class _Search:
     """State of one optimisation run: evaluator, phase, iteration counts."""
 
-    def __init__(self, problem, backend, max_evaluations, progress, fd_step):
+    def __init__(self, problem, backend, max_evaluations, progress, fd_step, patience):
         self.problem = problem
+        self.patience = patience
         self.progress = progress
         self.fd_step = fd_step
         self.evaluator = Evaluator(backend, max_evaluations, on_batch=self._report)
@@ -219,12 +229,21 @@ class _Search:
         f = np.array([e.f for e in self._batch(points)])
         return f[0], (f[1:] - f[0]) / h
 
+    def _iterated_local(self, *_):
+        self._iterated()
+        # Eq. (8) inside the colliding region only asks for a slower impact,
+        # which softer springs always give: the search then slides towards the
+        # lower bound and never leaves the region. Fig. 4's answer is a new
+        # K_0, so a start still colliding after `patience` iterations ends.
+        if self.iteration >= self.patience and self.evaluator.best.outcome.collided:
+            raise StopIteration
+
     def local(self, x0) -> bool:
         """One L-BFGS-B run from x0; True if it converged."""
         self.nstarts += 1
         self.phase, self.iteration = f"local {self.nstarts}", 0
         res = minimize(self.fun_and_grad, x0, jac=True, method="L-BFGS-B",
-                       bounds=self.problem.x_bounds, callback=self._iterated,
+                       bounds=self.problem.x_bounds, callback=self._iterated_local,
                        # ftol near the objective's noise level: below it the
                        # solver would only chase sampling noise.
                        options={"ftol": 1e-4, "gtol": 1e-4, "maxiter": 50})

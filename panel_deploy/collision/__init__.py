@@ -1,0 +1,16 @@
+"""Collision detection between panels (paper section 3.2, Eq. 7).
+
+``check_trajectory(model, result, settings) -> CollisionReport`` checks a
+sampled trajectory; :class:`CollisionMonitor` does the same on a stream of
+joint states (``update(t, theta, omega=None) -> events``). What counts as a
+collision, and what is guaranteed between samples, is stated in
+:mod:`panel_deploy.collision.monitor`; distance accuracy in
+:mod:`panel_deploy.collision.geometry`.
+"""
+
+from .check import CollisionReport, check_trajectory, collide_command
+from .geometry import BoxSet, PairGeometry
+from .monitor import CollisionEvent, CollisionMonitor, CollisionSettings
+
+__all__ = ["BoxSet", "CollisionEvent", "CollisionMonitor", "CollisionReport", "CollisionSettings",
+           "PairGeometry", "check_trajectory", "collide_command"]

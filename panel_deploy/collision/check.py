@@ -1,0 +1,232 @@
+"""Collision check of a sampled trajectory (paper section 3.2 and Eq. 7).
+
+:func:`check_trajectory` feeds a :class:`~panel_deploy.dynamics.result.SimulationResult`
+to a :class:`~.monitor.CollisionMonitor` one sample at a time (the same code a
+live stream uses) and stops at the first collision: the trajectory after it
+is invalid.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..model import Model
+from .monitor import CollisionEvent, CollisionMonitor, CollisionSettings
+
+
+@dataclass
+class CollisionReport:
+    """What the collision check found on one trajectory.
+
+    Shapes: P checked pairs, s_c samples checked (up to and including the
+    sample that revealed the first collision).
+
+    Attributes
+    ----------
+    pairs : (P, 2) ndarray of int
+        Body indices of every checked pair (``model.collision_pairs``).
+    pair_names : list of (str, str)
+    t : (s_c,) ndarray
+        Sample instants checked, s.
+    distances : (s_c, P) ndarray
+        Signed distance D_j of every pair, m (the paper's D_j is
+        ``max(distances, 0)``); where ``exact`` is False, a lower bound above
+        ``settings.margin`` (broad phase).
+    exact : (s_c, P) ndarray of bool
+    n_valid : int
+        Samples before the first collision (all if none): rows ``[:n_valid]``
+        are the valid trajectory.
+    first_collision : CollisionEvent or None
+        The earliest collision.
+    events : list of CollisionEvent
+        Every pair that started colliding in (t_{j-1}, t_j], j the sample
+        of the first collision.
+    V : (P,) ndarray
+        Eq. (7) at that sample, m/s, zero for pairs not colliding (all zero
+        if none). Before the third sample Eq. (7) is undefined and the
+        event's ``normal_speed`` stands in.
+    v : float
+        max V, m/s (0 if no collision).
+    d : float
+        Smallest distance over the valid trajectory, m, among the pairs that
+        count (see :mod:`.monitor`: designed contacts are left out); inf if
+        none counted.
+    d_time : float
+    d_pair : (str, str) or None
+    counters : dict
+    settings : CollisionSettings
+    wall_time : float
+        s spent in the check.
+    """
+
+    pairs: np.ndarray
+    pair_names: list
+    t: np.ndarray
+    distances: np.ndarray
+    exact: np.ndarray
+    n_valid: int
+    first_collision: CollisionEvent | None
+    events: list
+    V: np.ndarray
+    v: float
+    d: float
+    d_time: float
+    d_pair: tuple | None
+    counters: dict
+    settings: CollisionSettings
+    wall_time: float = 0.0
+    flat_contact: np.ndarray = field(default=None, repr=False)
+
+    @property
+    def collided(self) -> bool:
+        return self.first_collision is not None
+
+    @property
+    def valid_until(self) -> float:
+        """Last valid sample instant, s (nan if even the first sample collides)."""
+        return float(self.t[self.n_valid - 1]) if self.n_valid else math.nan
+
+    def first_collision_dict(self) -> dict | None:
+        """The first collision as plain values (time, pair, point, speeds), or None."""
+        if self.first_collision is None:
+            return None
+        out = self.first_collision.to_dict()
+        out["v"] = self.v
+        return out
+
+    def to_dict(self, arrays: bool = False) -> dict:
+        """JSON-able summary; with ``arrays`` also t, distances (m) and exact."""
+        out = {
+            "collided": self.collided,
+            "first_collision": self.first_collision_dict(),
+            "colliding_pairs": [e.to_dict() for e in self.events],
+            "v": self.v,
+            "d": None if math.isinf(self.d) else self.d,
+            "d_time": None if math.isnan(self.d_time) else self.d_time,
+            "d_pair": list(self.d_pair) if self.d_pair else None,
+            "samples_checked": int(len(self.t)),
+            "valid_samples": int(self.n_valid),
+            "valid_until": None if math.isnan(self.valid_until) else self.valid_until,
+            "pairs_checked": int(len(self.pairs)),
+            "tolerance": self.settings.tolerance,
+            "refine": self.settings.refine,
+            "counters": dict(self.counters),
+            "wall_time": self.wall_time,
+        }
+        if arrays:
+            out.update(t=self.t.tolist(), pairs=[list(n) for n in self.pair_names],
+                       distances=self.distances.tolist(), exact=self.exact.tolist())
+        return out
+
+    def summary(self) -> str:
+        """A few lines of text for the command line."""
+        lines = []
+        if self.first_collision is None:
+            lines.append(f"no collision in {len(self.t)} samples up to t = {self.t[-1]:.4f} s"
+                         if len(self.t) else "no samples")
+        else:
+            e = self.first_collision
+            touch = f", first touch at {e.contact_time:.4f} s" if e.contact_time is not None else ""
+            lines.append(f"first collision at t = {e.t:.4f} s (sample {e.sample}, "
+                         f"t_j = {self.t[e.sample]:.4f} s{touch}): {e.names[0]} - {e.names[1]}"
+                         f"{' (between samples)' if e.refined else ''}")
+            lines.append(f"  at ({e.point[0]:.4f}, {e.point[1]:.4f}, {e.point[2]:.4f}) m, "
+                         f"approach speed v = {self.v:.4f} m/s (Eq. 7), "
+                         f"normal speed {e.normal_speed:.4f} m/s")
+            if len(self.events) > 1:
+                others = ", ".join(f"{a}-{b}" for a, b in (x.names for x in self.events[1:]))
+                lines.append(f"  also colliding by t_j: {others}")
+        if math.isinf(self.d):
+            lines.append("d: no pair counted")
+        else:
+            lines.append(f"d = {self.d * 1e3:.3f} mm at t = {self.d_time:.4f} s "
+                         f"({self.d_pair[0]} - {self.d_pair[1]}), over {self.n_valid} valid samples")
+        return "\n".join(lines)
+
+
+def _settings(settings) -> CollisionSettings:
+    if settings is None:
+        return CollisionSettings()
+    if isinstance(settings, CollisionSettings):
+        return settings
+    return CollisionSettings.from_scene(settings)
+
+
+def check_trajectory(model: Model, result, settings=None, *, stop_at_first: bool = True) -> CollisionReport:
+    """Distances D_j, first collision, V_j, v and d of a sampled trajectory.
+
+    Parameters
+    ----------
+    model : Model
+        The model that was simulated.
+    result : SimulationResult
+        Uses ``t``, ``theta`` and ``omega``; a failed run is checked over
+        the samples it has.
+    settings : CollisionSettings, CollisionSection or Scene, optional
+    stop_at_first : bool
+        Stop at the sample that reveals the first collision (the rest is
+        invalid). False checks every sample (``events`` then still holds
+        only the first collision's sample).
+
+    Returns
+    -------
+    CollisionReport
+    """
+    start = time.perf_counter()
+    settings = _settings(settings)
+    monitor = CollisionMonitor(model, settings)
+    t = np.asarray(result.t, dtype=float)
+    P = len(monitor.pairs)
+    D = np.empty((len(t), P))
+    exact = np.empty((len(t), P), dtype=bool)
+    first_events: list = []
+    n_valid = len(t)
+    d, d_time, d_pair = math.inf, math.nan, None
+    checked = 0
+    for j in range(len(t)):
+        events = monitor.update(t[j], result.theta[j], result.omega[j])
+        D[j], exact[j] = monitor.distances, monitor.exact
+        checked = j + 1
+        if events and not first_events:
+            first_events = events
+            n_valid = j
+            if stop_at_first:
+                break
+        if not first_events and monitor.min_distance < d:
+            d, d_time, d_pair = monitor.min_distance, float(t[j]), monitor.pair_names(monitor.min_pair)
+    # Eq. (7) needs two earlier samples; before that the kinematic speed stands in.
+    V = np.zeros(P)
+    for e in first_events:
+        V[e.pair] = e.approach_speed if math.isfinite(e.approach_speed) else e.normal_speed
+    v = float(V.max()) if first_events else 0.0
+    counters = dict(monitor.counters, exact_fallbacks=monitor.exact_fallbacks)
+    return CollisionReport(
+        pairs=monitor.pairs, pair_names=[monitor.pair_names(k) for k in range(P)],
+        t=t[:checked], distances=D[:checked], exact=exact[:checked], n_valid=n_valid,
+        first_collision=first_events[0] if first_events else None, events=first_events,
+        V=V, v=v, d=d, d_time=d_time, d_pair=d_pair, counters=counters,
+        settings=settings, wall_time=time.perf_counter() - start, flat_contact=monitor.flat_contact)
+
+
+def collide_command(args) -> int:
+    """``panel-deploy collide TRAJECTORY [--json]``: check a saved trajectory.
+
+    The model is rebuilt from the scene stored in the file; only its
+    geometry and tree matter here, not the stored stiffnesses.
+    """
+    from ..build import build_model
+    from ..trajectory_io import load_trajectory
+
+    result, scene, _ = load_trajectory(args.trajectory)
+    model = build_model(scene)
+    report = check_trajectory(model, result, CollisionSettings.from_scene(scene))
+    if getattr(args, "json", False):
+        print(json.dumps(report.to_dict()))
+    else:
+        print(report.summary())
+    return 0

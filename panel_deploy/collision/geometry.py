@@ -1,0 +1,198 @@
+"""Signed distances between the panels' boxes: FCL narrow phase, certified.
+
+Every body is one box of edge lengths ``body.size`` centred on the body frame
+(merged panels are one box; thickness included). The signed distance of two
+boxes is their Euclidean distance when apart (m, > 0) and minus their
+penetration depth when they interfere (m, < 0).
+
+Accuracy. python-fcl 0.7 does not expose FCL's GJK/EPA tolerances (its
+``DistanceRequest`` has only ``enable_nearest_points``, ``enable_signed_distance``
+and ``gjk_solver_type``). Measured against two exact references on random box
+pairs, FCL's distance is exact to ~1e-16 m in about 99.8 % of separated pairs
+but over-estimates the rest by up to ~1e-4 m, with either GJK solver.
+So each separated distance is certified: FCL's nearest points give an upper
+bound |p_b - p_a|, and the separation of the boxes along n = (p_b - p_a)/|.|
+(or 0) a lower bound; if the two differ by more than ``CERTIFY_TOL`` the distance is
+recomputed exactly by vertex/box and edge/edge enumeration. When the boxes
+interfere, the depth is taken from the separating-axis test, exact for boxes.
+(FCL's signed distance agreed with it to 1e-16 m on random pairs, but aborts
+the whole process on some near-touching pairs, so it is not used.)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import product
+
+import fcl
+import numpy as np
+
+from ..model import Model
+
+CERTIFY_TOL = 1e-10
+"""Largest accepted gap (m) between FCL's distance and its lower bound max(0, separation)."""
+
+_SIGNS = np.array(list(product((-1.0, 1.0), repeat=3)))
+_EDGES = np.array([(i, j) for i in range(8) for j in range(i + 1, 8)
+                   if np.count_nonzero(_SIGNS[i] != _SIGNS[j]) == 1])
+
+
+@dataclass(frozen=True)
+class PairGeometry:
+    """Signed distance of one pair and where it is attained.
+
+    ``point_a``, ``point_b`` (3,) are the nearest points on each box when apart
+    and the centre of FCL's contact manifold (both equal) when interfering, ground frame, m; ``normal`` (3,) is the unit direction from
+    box a towards box b along which the signed distance is measured.
+    """
+
+    distance: float
+    point_a: np.ndarray
+    point_b: np.ndarray
+    normal: np.ndarray
+
+
+class BoxSet:
+    """The boxes of a model's bodies at one configuration.
+
+    Call :meth:`set_poses` with the forward kinematics of a state, then
+    :meth:`lower_bounds` (cheap, vectorised, all pairs) and
+    :meth:`signed_distance` (exact, one pair).
+    """
+
+    def __init__(self, model: Model):
+        self.half = np.array([np.asarray(b.size, dtype=float) / 2.0 for b in model.bodies])
+        self.radius = np.linalg.norm(self.half, axis=1)
+        self._objects = [fcl.CollisionObject(fcl.Box(*(2.0 * h)), fcl.Transform()) for h in self.half]
+        # No enable_signed_distance: FCL's signed GJK/EPA aborts the process
+        # (std::logic_error in validateNearestFeatureOfPolytopeBeingEdge) on
+        # near-touching boxes with either solver; depth comes from SAT instead.
+        self._request = fcl.DistanceRequest(enable_nearest_points=True)
+        self._contact_request = fcl.CollisionRequest(enable_contact=True, num_max_contacts=8)
+        self.rotation = np.tile(np.eye(3), (len(self.half), 1, 1))
+        self.position = np.zeros((len(self.half), 3))
+        self.exact_fallbacks = 0
+
+    def set_poses(self, rotation, position):
+        """Place every box: ``rotation`` (nb, 3, 3), ``position`` (nb, 3) m."""
+        self.rotation = np.asarray(rotation, dtype=float)
+        self.position = np.asarray(position, dtype=float)
+        for obj, R, p in zip(self._objects, self.rotation, self.position):
+            obj.setRotation(R)
+            obj.setTranslation(p)
+
+    def lower_bounds(self, pairs: np.ndarray) -> np.ndarray:
+        """A lower bound (m) on the distance of every pair, shape (P,).
+
+        The larger of the gap between the two axis-aligned bounding boxes and
+        the gap between the two bounding spheres; <= 0 says nothing.
+        """
+        half_aabb = np.einsum("bij,bj->bi", np.abs(self.rotation), self.half)
+        a, b = pairs[:, 0], pairs[:, 1]
+        delta = np.abs(self.position[b] - self.position[a])
+        gap = np.maximum(delta - half_aabb[a] - half_aabb[b], 0.0)
+        aabb = np.linalg.norm(gap, axis=1)
+        sphere = np.linalg.norm(self.position[b] - self.position[a], axis=1) - self.radius[a] - self.radius[b]
+        return np.maximum(aabb, sphere)
+
+    def separation(self, i: int, j: int, n) -> float:
+        """Gap (m) between the projections of boxes i and j on the unit vector n."""
+        ra = np.abs(self.rotation[i].T @ n) @ self.half[i]
+        rb = np.abs(self.rotation[j].T @ n) @ self.half[j]
+        return float(n @ (self.position[j] - self.position[i]) - ra - rb)
+
+    def signed_distance(self, i: int, j: int) -> float:
+        """Signed distance (m) of boxes i and j: distance, or minus penetration depth."""
+        return self.pair_geometry(i, j).distance
+
+    def pair_geometry(self, i: int, j: int) -> PairGeometry:
+        """Signed distance of boxes i and j with nearest points and normal."""
+        result = fcl.DistanceResult()
+        d = fcl.distance(self._objects[i], self._objects[j], self._request, result)
+        if d <= 0.0:
+            return self._penetration(i, j)
+        pa, pb = result.nearest_points
+        n = (pb - pa) / d
+        if d - max(self.separation(i, j, n), 0.0) > CERTIFY_TOL:
+            self.exact_fallbacks += 1
+            d, pa, pb = self._exact_distance(i, j)
+            n = (pb - pa) / d if d > 0 else np.zeros(3)
+        return PairGeometry(float(d), pa, pb, n)
+
+    def _penetration(self, i, j):
+        """Exact depth by the separating-axis test: for two boxes the face
+        normals and the 9 edge cross products contain the direction of least
+        overlap, so the smallest overlap over those 15 axes is the depth.
+        The point is the centre of FCL's box-box contact manifold."""
+        Ra, Rb = self.rotation[i], self.rotation[j]
+        axes = np.concatenate([Ra.T, Rb.T, np.cross(Ra.T[:, None], Rb.T[None]).reshape(9, 3)])
+        norm = np.linalg.norm(axes, axis=1)
+        axes = axes[norm > 1e-9] / norm[norm > 1e-9, None]
+        delta = self.position[j] - self.position[i]
+        along = axes @ delta
+        overlap = (np.abs(axes @ Ra) @ self.half[i] + np.abs(axes @ Rb) @ self.half[j] - np.abs(along))
+        k = np.argmin(overlap)
+        if overlap[k] < 0.0:
+            # FCL said "in contact" but an axis separates them: apart by a hair.
+            self.exact_fallbacks += 1
+            d, pa, pb = self._exact_distance(i, j)
+            return PairGeometry(d, pa, pb, axes[k] * np.sign(along[k]))
+        n = axes[k] * (1.0 if along[k] >= 0 else -1.0)
+        result = fcl.CollisionResult()
+        fcl.collide(self._objects[i], self._objects[j], self._contact_request, result)
+        if result.contacts:
+            x = np.mean([c.pos for c in result.contacts], axis=0)
+        else:
+            x = 0.5 * (self.corners(i)[np.argmax(self.corners(i) @ n)]
+                       + self.corners(j)[np.argmin(self.corners(j) @ n)])
+        return PairGeometry(float(-overlap[k]), x, x, n)
+
+    def corners(self, i: int) -> np.ndarray:
+        """The 8 corners (8, 3) of box i, m."""
+        return self.position[i] + (_SIGNS * self.half[i]) @ self.rotation[i].T
+
+    def _exact_distance(self, i, j):
+        """Distance of two apart boxes by enumerating vertex/box and edge/edge pairs.
+
+        For convex polyhedra the nearest points lie on a vertex of one and a
+        face of the other, or on two edges; so the minimum over all vertices'
+        distances to the other box and all edge pairs' distances is exact.
+        """
+        cand = []
+        for a, b in ((i, j), (j, i)):
+            v = self.corners(a)
+            local = (v - self.position[b]) @ self.rotation[b]
+            nearest = self.position[b] + np.clip(local, -self.half[b], self.half[b]) @ self.rotation[b].T
+            cand.append((v, nearest) if a == i else (nearest, v))
+        ca, cb = self.corners(i), self.corners(j)
+        p1, q1 = ca[_EDGES[:, 0]], ca[_EDGES[:, 1]]
+        p2, q2 = cb[_EDGES[:, 0]], cb[_EDGES[:, 1]]
+        s1, s2 = segment_closest_points(p1[:, None], q1[:, None], p2[None], q2[None])
+        cand.append((s1.reshape(-1, 3), s2.reshape(-1, 3)))
+        pa = np.concatenate([c[0] for c in cand])
+        pb = np.concatenate([c[1] for c in cand])
+        k = np.argmin(np.linalg.norm(pb - pa, axis=1))
+        return float(np.linalg.norm(pb[k] - pa[k])), pa[k], pb[k]
+
+
+def segment_closest_points(p1, q1, p2, q2):
+    """Closest points of segments [p1, q1] and [p2, q2], broadcast over leading axes.
+
+    Ericson, Real-Time Collision Detection, 5.1.9, vectorised; parallel
+    segments fall back to the nearest point of the second to p1 (exact,
+    since for parallel segments an endpoint is always among the nearest).
+    """
+    p1, q1, p2, q2 = np.broadcast_arrays(p1, q1, p2, q2)
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a = np.einsum("...i,...i", d1, d1)
+    e = np.einsum("...i,...i", d2, d2)
+    b = np.einsum("...i,...i", d1, d2)
+    c = np.einsum("...i,...i", d1, r)
+    f = np.einsum("...i,...i", d2, r)
+    denom = a * e - b * b
+    parallel = denom <= 1e-12 * a * e
+    s = np.where(parallel, 0.0, np.clip((b * f - c * e) / np.where(parallel, 1.0, denom), 0.0, 1.0))
+    t = (b * s + f) / e
+    s = np.where(t < 0.0, np.clip(-c / a, 0.0, 1.0), np.where(t > 1.0, np.clip((b - c) / a, 0.0, 1.0), s))
+    t = np.clip(t, 0.0, 1.0)
+    return p1 + s[..., None] * d1, p2 + t[..., None] * d2

@@ -1,0 +1,426 @@
+"""Streaming collision monitor: feed joint states one at a time, get events.
+
+What counts as a collision
+--------------------------
+Let sd_p(t) be the signed distance of pair p (m; > 0 apart, < 0 minus the
+penetration depth) for the pairs of ``model.collision_pairs`` (panels that
+share no hinge; hinged neighbours are never checked, so a hinge reaching
+theta = 0 or pi is a contact, not a collision). Pair p **collides** at the
+first instant t with
+
+    sd_p(t) < -tolerance            (tolerance = CollisionSection.tolerance)
+
+i.e. interference deeper than the tolerance. Touching within the tolerance
+is not a collision. That is deliberate, because the design has contacts on
+purpose: in the stowed package adjacent layers and the two stacks touch, and
+in the flat array the panels on either side of a slit (and diagonal
+neighbours, at a corner) touch. The dynamics lets unhinged panels pass
+through each other, so a real impact keeps going into interference and
+crosses the tolerance within about tolerance / approach speed after the
+first touch; the event also gives that first touch (``contact_time``).
+
+The smallest distance ``d`` leaves out these designed contacts: a pair
+counts towards d at a sample unless it touches (sd <= tolerance) in the flat
+state, or has touched ever since release without yet separating beyond the
+tolerance. Those pairs are still checked for collisions.
+
+Between samples
+---------------
+With ``refine`` on, every interval (t_{j-1}, t_j] is checked under the
+motion of :mod:`.motion` (cubic Hermite interpolation of theta, omega;
+linear when the stream gives no omega): a pair whose lower bound
+(sd_a + sd_b - L (t_b - t_a)) / 2 could fall below -tolerance - resolution is
+bisected, with the bound L recomputed on each half. Guarantee: for the
+interpolated motion, no pair reaches sd < -(tolerance + resolution) between
+two samples unnoticed, and a reported collision time is the first instant
+with sd < -tolerance to within ``time_resolution``. (Nothing is claimed
+about motion that differs from the interpolant; feed denser samples to
+tighten that.)
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from ..errors import SceneError, TrajectoryError
+from ..kinematics import forward_kinematics
+from ..model import Model
+from .geometry import BoxSet, PairGeometry
+from .motion import HermiteSegment, PairSpeedBound
+
+
+@dataclass(frozen=True)
+class CollisionSettings:
+    """How collisions are detected. Lengths in m, times in s.
+
+    Attributes
+    ----------
+    tolerance : float
+        Interference depth beyond which touching panels collide (scene
+        ``collision.tolerance``).
+    refine : bool
+        Check between samples (scene ``collision.refine``).
+    resolution : float
+        Depth slack of the between-sample guarantee.
+    time_resolution : float
+        Precision of a located collision or first-touch time.
+    margin : float
+        Broad phase: a pair whose cheap lower bound exceeds this is not
+        computed exactly at a sample (its entry of D holds the bound), unless
+        it could be the smallest distance of that sample. ``inf`` computes all.
+    """
+
+    tolerance: float = 1.0e-4
+    refine: bool = True
+    resolution: float = 1.0e-6
+    time_resolution: float = 1.0e-6
+    margin: float = 0.02
+
+    def __post_init__(self):
+        for f in ("tolerance", "resolution", "time_resolution", "margin"):
+            v = getattr(self, f)
+            if not v >= 0 or (f in ("resolution", "time_resolution") and v == 0):
+                raise SceneError(f"collision.{f}", f"expected a number > 0, got {v!r}")
+        if self.margin < self.tolerance:
+            raise SceneError("collision.margin",
+                             f"must be >= collision.tolerance ({self.tolerance:g}), got {self.margin:g}")
+
+    @classmethod
+    def from_scene(cls, scene, **overrides) -> "CollisionSettings":
+        """Settings from a Scene (or its ``collision`` section); missing keys keep defaults."""
+        section = getattr(scene, "collision", scene)
+        known = {f.name for f in fields(cls)}
+        values = {k: getattr(section, k) for k in known if hasattr(section, k)}
+        values.update(overrides)
+        return cls(**values)
+
+
+@dataclass(frozen=True)
+class CollisionEvent:
+    """A pair starting to collide.
+
+    Attributes
+    ----------
+    t : float
+        First instant with sd < -tolerance, s.
+    contact_time : float or None
+        Last instant before ``t`` at which the pair touched (sd = 0), s;
+        None if it was already in contact at the previous sample.
+    sample : int
+        Index j of the update (sample t_j) that reported it; t_{j-1} < t <= t_j.
+    pair : int
+        Index into :attr:`CollisionMonitor.pairs`.
+    bodies : (int, int)
+    names : (str, str)
+    distance : float
+        Signed distance at ``t``, m (just below -tolerance).
+    point, normal : (3,) ndarray
+        Where (m, ground frame) and along which unit direction (body a
+        towards body b) the pair interferes at ``t``.
+    approach_speed : float
+        V_j of Eq. (7), (D_{j-2} - D_{j-1}) / (t_{j-1} - t_{j-2}), m/s; nan
+        before the third sample.
+    normal_speed : float
+        -d sd/dt at ``t`` from the body velocities at ``point`` along
+        ``normal``, m/s (> 0 approaching).
+    refined : bool
+        True if found between samples (D_j itself may show no interference:
+        the panels passed through each other).
+    """
+
+    t: float
+    contact_time: float | None
+    sample: int
+    pair: int
+    bodies: tuple
+    names: tuple
+    distance: float
+    point: np.ndarray
+    normal: np.ndarray
+    approach_speed: float
+    normal_speed: float
+    refined: bool
+
+    def to_dict(self) -> dict:
+        return {"t": self.t, "contact_time": self.contact_time, "sample": self.sample,
+                "pair": list(self.names), "bodies": list(self.bodies), "distance": self.distance,
+                "point": self.point.tolist(), "normal": self.normal.tolist(),
+                "approach_speed": None if math.isnan(self.approach_speed) else self.approach_speed,
+                "normal_speed": self.normal_speed, "refined": self.refined}
+
+
+@dataclass
+class _Sample:
+    t: float
+    theta: np.ndarray
+    omega: np.ndarray
+    distances: np.ndarray
+    exact: np.ndarray
+    linear: bool
+    radii: np.ndarray
+
+
+def _segment(prev: _Sample, cur: _Sample) -> HermiteSegment:
+    """Motion between two samples: Hermite, or linear in theta when no rates were given."""
+    if cur.linear:
+        w = (cur.theta - prev.theta) / (cur.t - prev.t)
+        return HermiteSegment(prev.t, prev.theta, w, cur.t, cur.theta, w)
+    return HermiteSegment(prev.t, prev.theta, prev.omega, cur.t, cur.theta, cur.omega)
+
+
+class CollisionMonitor:
+    """Distances and collision events of a stream of joint states.
+
+    The same object serves a saved trajectory (:func:`check_trajectory` feeds
+    it sample by sample) and a live stream (simulator or encoder messages).
+
+    Parameters
+    ----------
+    model : Model
+    settings : CollisionSettings, optional
+
+    Attributes
+    ----------
+    pairs : (P, 2) ndarray of int
+        ``model.collision_pairs``.
+    flat_contact : (P,) ndarray of bool
+        Pairs touching in the flat state (left out of d).
+    resting : (P,) ndarray of bool or None
+        Pairs in contact ever since the first update.
+    colliding : (P,) ndarray of bool
+        Pairs with sd < -tolerance at the last update.
+    distances : (P,) ndarray
+        Signed distances at the last update, m; where ``exact`` is False a
+        lower bound above ``settings.margin``.
+    exact : (P,) ndarray of bool
+    min_distance : float
+        Smallest distance of the last update over the pairs that count
+        towards d, m (inf if none).
+    min_pair : int
+        Its pair index (-1 if none).
+    events : list of CollisionEvent
+        Every event so far, in order.
+    counters : dict of str -> int
+        samples, exact_pairs, pruned_pairs (left out by the broad phase),
+        refined_intervals, refine_evaluations, exact_fallbacks.
+    """
+
+    def __init__(self, model: Model, settings: CollisionSettings | None = None):
+        self.model = model
+        self.settings = settings or CollisionSettings()
+        self.pairs = np.array(model.collision_pairs, dtype=int).reshape(-1, 2)
+        self._boxes = BoxSet(model)
+        self._scratch = BoxSet(model)
+        self._speed = PairSpeedBound(model, self.pairs)
+        flat = np.zeros(model.n_coords)
+        rows = np.arange(len(self.pairs))
+        self.flat_contact = self._distances_at(flat, rows) <= self.settings.tolerance
+        self.resting = None
+        self.colliding = np.zeros(len(self.pairs), dtype=bool)
+        self.distances = np.full(len(self.pairs), np.inf)
+        self.exact = np.zeros(len(self.pairs), dtype=bool)
+        self.min_distance = math.inf
+        self.min_pair = -1
+        self.events = []
+        self._history = deque(maxlen=2)
+        self._count = 0
+        self.counters = dict(samples=0, exact_pairs=0, pruned_pairs=0, refined_intervals=0,
+                             refine_evaluations=0)
+
+    @property
+    def first_collision(self) -> CollisionEvent | None:
+        return self.events[0] if self.events else None
+
+    @property
+    def exact_fallbacks(self) -> int:
+        """Distances FCL got wrong and that were recomputed exactly (geometry module)."""
+        return self._boxes.exact_fallbacks + self._scratch.exact_fallbacks
+
+    def pair_names(self, p: int) -> tuple:
+        a, b = self.pairs[p]
+        return self.model.bodies[a].name, self.model.bodies[b].name
+
+    def update(self, t, theta, omega=None) -> list:
+        """Take the state at instant t; return the collisions that began since the last one.
+
+        Parameters
+        ----------
+        t : float
+            s, larger than at the previous update.
+        theta : (n_coords,) array_like
+            Hinge angles, rad.
+        omega : (n_coords,) array_like, optional
+            Hinge rates, rad/s. Without them (e.g. encoder angles only) the
+            rates are the secant slopes, so the motion between updates is
+            taken to be linear in theta.
+
+        Returns
+        -------
+        list of CollisionEvent
+            Ordered by time; also appended to :attr:`events`.
+        """
+        t = float(t)
+        theta = np.asarray(theta, dtype=float)
+        if theta.shape != (self.model.n_coords,):
+            raise TrajectoryError(f"theta: expected shape ({self.model.n_coords},), got {theta.shape}")
+        prev = self._history[-1] if self._history else None
+        if prev is not None and not t > prev.t:
+            raise TrajectoryError(f"t: updates must move forward in time, got {t} after {prev.t}")
+        linear = omega is None
+        if linear:
+            omega = np.zeros_like(theta) if prev is None else (theta - prev.theta) / (t - prev.t)
+        else:
+            omega = np.asarray(omega, dtype=float)
+
+        R, p = forward_kinematics(self.model, theta)
+        self._boxes.set_poses(R, p)
+        D, exact = self._sample_distances()
+        if self.resting is None:
+            self.resting = D <= self.settings.tolerance
+        cur = _Sample(t, theta, omega, D, exact, linear, self._speed.radii(R, p))
+
+        tol = self.settings.tolerance
+        if prev is not None and self.settings.refine:
+            found = self._refine(prev, cur)
+        else:
+            found = {int(k): (t, None) for k in np.flatnonzero((D < -tol) & ~self.colliding)}
+        events = [self._event(k, tc, contact, prev, cur) for k, (tc, contact) in found.items()]
+        events.sort(key=lambda e: e.t)
+
+        self.colliding = D < -tol
+        self.resting &= ~(D > tol)
+        self.distances, self.exact = D, exact
+        counts = np.flatnonzero(exact & ~self.flat_contact & ~self.resting)
+        self.min_pair = int(counts[np.argmin(D[counts])]) if counts.size else -1
+        self.min_distance = float(D[self.min_pair]) if counts.size else math.inf
+        self._history.append(cur)
+        self._count += 1
+        self.counters["samples"] += 1
+        self.events.extend(events)
+        return events
+
+    # --- distances -------------------------------------------------------------------------
+
+    def _distances_at(self, theta, rows, radii=False):
+        """Exact signed distances of ``rows`` at angles ``theta``, on the scratch boxes
+        (and, with ``radii``, the hinge-line radii of :class:`.motion.PairSpeedBound`)."""
+        R, p = forward_kinematics(self.model, theta)
+        self._scratch.set_poses(R, p)
+        sd = np.array([self._scratch.signed_distance(*self.pairs[k]) for k in rows])
+        return (sd, self._speed.radii(R, p)) if radii else sd
+
+    def _sample_distances(self):
+        """Signed distances of one sample, exact where they can matter (see ``margin``)."""
+        lb = self._boxes.lower_bounds(self.pairs)
+        D = lb.copy()
+        exact = np.zeros(len(lb), dtype=bool)
+        counts = ~self.flat_contact & (~self.resting if self.resting is not None else True)
+        best = math.inf
+        margin = self.settings.margin
+        for k in np.argsort(lb, kind="stable"):
+            if lb[k] > margin and lb[k] >= best:
+                break
+            D[k] = self._boxes.signed_distance(*self.pairs[k])
+            exact[k] = True
+            if counts[k]:
+                best = min(best, D[k])
+        self.counters["exact_pairs"] += int(exact.sum())
+        self.counters["pruned_pairs"] += int((~exact).sum())
+        return D, exact
+
+    # --- between samples -------------------------------------------------------------------
+
+    def _refine(self, prev: _Sample, cur: _Sample) -> dict:
+        """First collision instant (and first touch) in (prev.t, cur.t] of every pair.
+
+        Depth-first bisection, left half first, so mid-points are *visited*
+        in time order; a pair is dropped from an interval once its lower
+        bound proves sd >= -(tolerance + resolution) there.
+        """
+        s = self.settings
+        threshold = -s.tolerance
+        seg = _segment(prev, cur)
+        last_touch = np.where(prev.distances >= 0.0, prev.t, np.nan)
+        found = {}
+
+        def visit(tm, rows, Sm):
+            for k, sd in zip(rows, Sm):
+                if k in found:
+                    continue
+                if sd < threshold:
+                    found[k] = (tm, self._first_touch(seg, k, last_touch[k], tm))
+                elif sd >= 0.0:
+                    last_touch[k] = tm
+
+        def node(a, b, Sa, Sb, Ra, Rb, rows):
+            L = self._speed(seg.rate_bound(a, b), b - a, Ra, Rb, rows)
+            open_ = (Sa + Sb - L * (b - a)) / 2.0 < threshold - s.resolution
+            open_ &= np.array([k not in found for k in rows], dtype=bool)
+            # A pair with Sb below the threshold is being located, not bounded:
+            # stop at the time resolution. Every other open pair closes once
+            # L (b - a) / 2 <= resolution, as both its ends are >= threshold.
+            open_ &= ~((Sb < threshold) & (b - a <= s.time_resolution))
+            if not open_.any():
+                return
+            rows, Sa, Sb = rows[open_], Sa[open_], Sb[open_]
+            m = 0.5 * (a + b)
+            Sm, Rm = self._distances_at(seg(m)[0], rows, radii=True)
+            self.counters["refine_evaluations"] += 1
+            node(a, m, Sa, Sm, Ra, Rm, rows)
+            visit(m, rows, Sm)
+            node(m, b, Sm, Sb, Rm, Rb, rows)
+
+        evaluations = self.counters["refine_evaluations"]
+        rows = np.flatnonzero(~self.colliding)
+        node(prev.t, cur.t, prev.distances[rows], cur.distances[rows], prev.radii, cur.radii, rows)
+        if self.counters["refine_evaluations"] > evaluations:
+            self.counters["refined_intervals"] += 1
+        visit(cur.t, rows, cur.distances[rows])
+        return found
+
+    def _first_touch(self, seg, k, t_touch, t_hit):
+        """Instant in [t_touch, t_hit] where pair k's sd crosses 0, by bisection; None if unknown."""
+        if math.isnan(t_touch):
+            return None
+        lo, hi = t_touch, t_hit
+        while hi - lo > self.settings.time_resolution:
+            mid = 0.5 * (lo + hi)
+            if self._distances_at(seg(mid)[0], [k])[0] >= 0.0:
+                lo = mid
+            else:
+                hi = mid
+        return lo
+
+    # --- events ----------------------------------------------------------------------------
+
+    def _event(self, k, tc, contact_time, prev, cur) -> CollisionEvent:
+        if prev is not None:
+            theta, omega = _segment(prev, cur)(tc)
+        else:
+            theta, omega = cur.theta, cur.omega
+        R, p, v, w = forward_kinematics(self.model, theta, omega)
+        self._scratch.set_poses(R, p)
+        a, b = (int(x) for x in self.pairs[k])
+        g: PairGeometry = self._scratch.pair_geometry(a, b)
+        x = 0.5 * (g.point_a + g.point_b)
+        va = v[a] + np.cross(w[a], x - p[a])
+        vb = v[b] + np.cross(w[b], x - p[b])
+        return CollisionEvent(
+            t=tc, contact_time=contact_time, sample=self._count, pair=int(k), bodies=(a, b),
+            names=self.pair_names(k), distance=g.distance, point=x, normal=g.normal,
+            approach_speed=self._approach_speed(k), normal_speed=float(-(vb - va) @ g.normal),
+            refined=bool(tc < cur.t))
+
+    def _approach_speed(self, k) -> float:
+        """V_j of Eq. (7) for pair k at the current update, from the two previous samples."""
+        if len(self._history) < 2:
+            return math.nan
+        d = []
+        for smp in self._history:
+            d.append(smp.distances[k] if smp.exact[k] else self._distances_at(smp.theta, [k])[0])
+        older, newer = self._history
+        return float((d[0] - d[1]) / (newer.t - older.t))

@@ -39,13 +39,27 @@ def cmd_schema(args):
 
 def cmd_fold(args):
     from .fold.report import fold_command
-    if args.scene:
-        scene = _load(args)
-        args.rows, args.cols = scene.array.rows, scene.array.cols
-        args.circuit_cells = scene.fold
-    elif args.rows is None or args.cols is None:
-        raise SceneError("--rows/--cols", "give --rows and --cols, or --scene FILE")
-    return fold_command(args)
+    if not args.scene:
+        if args.rows is None or args.cols is None:
+            raise SceneError("--rows/--cols", "give --rows and --cols, or --scene FILE")
+        return fold_command(args)
+    import json
+
+    from . import fold
+    from .errors import DesignError
+    from .fold.report import design_dict, design_text
+
+    scene = _load(args)
+    f = scene.fold
+    try:
+        d = fold.design(scene.array.rows, scene.array.cols, f.circuit, f.ground, f.merge)
+    except DesignError as e:
+        raise SceneError("fold", str(e)) from None
+    print(json.dumps(design_dict(d), indent=1) if args.json else design_text(d))
+    if args.plot:
+        from .fold.plot import plot_design
+        plot_design(d, args.plot)
+    return 0 if d.stowed is not None else 1
 
 
 def cmd_simulate(args):
@@ -83,7 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--limit", type=int, default=50, help="list at most this many circuits")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.add_argument("--plot", metavar="FILE.png", help="draw the design and its stacks")
-    s.set_defaults(func=cmd_fold, circuit_cells=None)
+    s.set_defaults(func=cmd_fold)
 
     s = sub.add_parser("simulate", help="simulate one deployment and check it for collisions")
     s.add_argument("scene", help="scene YAML file, or the name of a shipped scene")

@@ -1,0 +1,237 @@
+"""Collision monitor and trajectory check on hand-built models with closed forms.
+
+Fold model: ground panel G (0.1 x 0.1 x 0.005 m) with P1 hinged on its right
+edge and P2 on its left edge, both on the top facet, folding up over G. Only
+P1-P2 is checked. With theta_1 = theta_2 = omega t the two inner tip edges
+are mirror images, so sd = 2 (a/2 + a cos theta) for pi/2 <= theta <= 2 pi/3
+(0.1 m below pi/2), and they first touch at theta = 2 pi / 3.
+"""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy.interpolate import CubicHermiteSpline
+
+from panel_deploy.collision import CollisionMonitor, CollisionSettings, check_trajectory
+from panel_deploy.errors import TrajectoryError
+from panel_deploy.model import Body, Hinge, Model, box_inertia
+
+from test_collision_geometry import reference_signed_distance
+
+A, T = 0.1, 0.005
+
+
+def body(name, x, length=A):
+    size = np.array([length, A, T])
+    return Body(name, (), size, 0.02, box_inertia(0.02, size), np.array([x, 0.0, 0.0]))
+
+
+def fold_model(p1_length=A):
+    bodies = [body("G", 0.0), body("P1", A / 2 + p1_length / 2, p1_length), body("P2", -A)]
+    hinges = [Hinge("G-P1", 0, 1, np.array([A / 2, A / 2, T / 2]), np.array([0.0, -1.0, 0.0]),
+                    A, "top", 0.1, 0.0043, math.pi, ()),
+              Hinge("G-P2", 0, 2, np.array([-A / 2, -A / 2, T / 2]), np.array([0.0, 1.0, 0.0]),
+                    A, "top", 0.1, 0.0043, math.pi, ())]
+    return Model.build(bodies, hinges, ground=0)
+
+
+def trajectory(t, theta, omega):
+    return SimpleNamespace(t=np.asarray(t), theta=np.asarray(theta), omega=np.asarray(omega))
+
+
+def linear_fold(omega=2.0, t_end=1.5, samples=301):
+    t = np.linspace(0.0, t_end, samples)
+    theta = np.column_stack([omega * t, omega * t])
+    return trajectory(t, theta, np.full_like(theta, omega))
+
+
+def sd_closed_form(theta):
+    return np.where(theta <= math.pi / 2, A, 2 * (A / 2 + A * np.cos(theta)))
+
+
+def test_model_geometry_folds_over_ground():
+    from panel_deploy.kinematics import forward_kinematics
+    m = fold_model()
+    assert m.collision_pairs == ((1, 2),)
+    R, p = forward_kinematics(m, [math.pi / 2, math.pi / 2])
+    assert p[1][2] > 0.04 and p[2][2] > 0.04
+
+
+def test_distances_match_closed_form_and_collision_time():
+    omega = 2.0
+    traj = linear_fold(omega)
+    rep = check_trajectory(fold_model(), traj, CollisionSettings())
+    t_touch = 2 * math.pi / 3 / omega
+    theta = traj.theta[: rep.n_valid, 0]
+    np.testing.assert_allclose(rep.distances[: rep.n_valid, 0], sd_closed_form(theta), atol=1e-9)
+    e = rep.first_collision
+    assert rep.collided and e.names == ("P1", "P2")
+    assert e.contact_time == pytest.approx(t_touch, abs=2e-6)
+    j = e.sample
+    assert traj.t[j - 1] < e.t <= traj.t[j]
+    assert t_touch <= e.t <= t_touch + (traj.t[1] - traj.t[0])
+    assert e.distance < -rep.settings.tolerance
+    # Eq. (7) from the closed-form distances of the two samples before t_j
+    D = sd_closed_form(traj.theta[[j - 2, j - 1], 0])
+    assert rep.v == pytest.approx((D[0] - D[1]) / (traj.t[j - 1] - traj.t[j - 2]), abs=1e-6)
+    assert rep.V[e.pair] == rep.v
+    assert rep.n_valid == j and rep.valid_until == traj.t[j - 1]
+    # d over the valid trajectory: the closest approach before the collision
+    assert rep.d == pytest.approx(sd_closed_form(theta).min(), abs=1e-9)
+    # normal speed = -d sd/dt at e.t, by central differences of the reference distance
+    from panel_deploy.kinematics import forward_kinematics
+    m = fold_model()
+    half = [b.size / 2 for b in m.bodies]
+
+    def sd(tt):
+        R, p = forward_kinematics(m, [omega * tt, omega * tt])
+        return reference_signed_distance(half[1], R[1], p[1], half[2], R[2], p[2])
+
+    h = 1e-6
+    assert e.normal_speed == pytest.approx(-(sd(e.t + h) - sd(e.t - h)) / (2 * h), rel=1e-3)
+
+
+def test_without_refinement_the_collision_is_found_at_the_next_sample():
+    traj = linear_fold()
+    rep = check_trajectory(fold_model(), traj, CollisionSettings(refine=False))
+    e = rep.first_collision
+    assert e.t == traj.t[e.sample] and not e.refined
+    assert e.t >= 2 * math.pi / 3 / 2.0
+
+
+def test_streaming_without_rates_gives_the_same_events():
+    traj = linear_fold()
+    rep = check_trajectory(fold_model(), traj)
+    mon = CollisionMonitor(fold_model())
+    events = []
+    for t, th in zip(traj.t, traj.theta):
+        events += mon.update(t, th)          # encoder angles only
+        if events:
+            break
+    assert events[0].sample == rep.first_collision.sample
+    assert events[0].t == pytest.approx(rep.first_collision.t, abs=2e-6)
+    np.testing.assert_allclose(mon.distances, rep.distances[-1], atol=1e-12)
+
+
+def test_monitor_rejects_time_going_backwards_and_bad_shapes():
+    mon = CollisionMonitor(fold_model())
+    mon.update(0.1, [0.0, 0.0])
+    with pytest.raises(TrajectoryError):
+        mon.update(0.1, [0.0, 0.0])
+    with pytest.raises(TrajectoryError):
+        mon.update(0.2, [0.0])
+
+
+def tunnelling_trajectory(samples=301, t_end=1.0):
+    """P1 (0.3 m long) sweeps through the wall P2 (held at pi/2) within one sample interval.
+
+    theta_1 = 2.75 + 0.9 tanh((t - t_c) / tau), t_c mid-way between two
+    samples, tau = dt / 3: the samples either side sit at theta ~ 1.94 and
+    3.56, both clear of the wall, while P1 passes right through it.
+    """
+    t = np.linspace(0.0, t_end, samples)
+    dt = t[1] - t[0]
+    tc, tau = t[samples // 2] + dt / 2, dt / 3
+    th1 = 2.75 + 0.9 * np.tanh((t - tc) / tau)
+    w1 = 0.9 / tau * (1.0 - np.tanh((t - tc) / tau) ** 2)
+    theta = np.column_stack([th1, np.full_like(t, math.pi / 2)])
+    omega = np.column_stack([w1, np.zeros_like(t)])
+    return trajectory(t, theta, omega)
+
+
+def reference_first_interference(model, traj, tol, n=20001):
+    """First instant with sd < -tol on the Hermite motion, by a dense grid and the QP reference."""
+    from panel_deploy.kinematics import forward_kinematics
+    spline = CubicHermiteSpline(traj.t, traj.theta, traj.omega)
+    half = [b.size / 2 for b in model.bodies]
+    j = len(traj.t) // 2
+    grid = np.linspace(traj.t[j], traj.t[j + 1], n)
+    for tt in grid:
+        R, p = forward_kinematics(model, spline(tt))
+        if reference_signed_distance(half[1], R[1], p[1], half[2], R[2], p[2]) < -tol:
+            return tt, grid[1] - grid[0]
+    return None, None
+
+
+def test_tunnelling_between_samples_is_caught():
+    model = fold_model(p1_length=0.3)
+    traj = tunnelling_trajectory()
+    tol = CollisionSettings().tolerance
+    sampled = check_trajectory(model, traj, CollisionSettings(refine=False))
+    assert not sampled.collided                       # every sample is clear: it tunnels
+    assert np.all(sampled.distances > tol)
+    rep = check_trajectory(model, traj)
+    e = rep.first_collision
+    assert rep.collided and e.refined and e.names == ("P1", "P2")
+    j = len(traj.t) // 2
+    assert e.sample == j + 1
+    t_ref, step = reference_first_interference(model, traj, tol)
+    assert t_ref is not None
+    assert abs(e.t - t_ref) <= step + 2 * rep.settings.time_resolution
+
+
+def slit_model():
+    """G (0, 0), P1 (a, 0) hinged to G, Q (0, a) hinged to G, P2 (a, a) hinged to Q.
+
+    Flat, P1 and P2 share a slit and G-P2, P1-Q touch at a corner line."""
+    def cell(name, x, y):
+        size = np.array([A, A, T])
+        return Body(name, (), size, 0.02, box_inertia(0.02, size), np.array([x, y, 0.0]))
+    bodies = [cell("G", 0, 0), cell("P1", A, 0), cell("Q", 0, A), cell("P2", A, A)]
+    top = T / 2
+    hinges = [Hinge("G-P1", 0, 1, np.array([A / 2, A / 2, top]), np.array([0, -1.0, 0]), A, "top", 0.1, 0.0, math.pi, ()),
+              Hinge("G-Q", 0, 2, np.array([-A / 2, A / 2, top]), np.array([1.0, 0, 0]), A, "top", 0.1, 0.0, math.pi, ()),
+              Hinge("Q-P2", 2, 3, np.array([A / 2, 3 * A / 2, top]), np.array([0, -1.0, 0]), A, "top", 0.1, 0.0, math.pi, ())]
+    return Model.build(bodies, hinges, ground=0)
+
+
+def test_designed_contacts_in_the_flat_state_are_not_collisions():
+    m = slit_model()
+    mon = CollisionMonitor(m)
+    names = {mon.pair_names(k) for k in np.flatnonzero(mon.flat_contact)}
+    assert names == {("G", "P2"), ("P1", "Q"), ("P1", "P2")}
+    for t in (0.0, 0.01, 0.02):
+        assert mon.update(t, np.zeros(3), np.zeros(3)) == []
+    assert np.all(np.abs(mon.distances) < 1e-12)      # they do touch
+    assert mon.min_distance == math.inf                # and none counts towards d
+
+
+def test_interference_beyond_tolerance_is_a_collision():
+    """Unfolding G-Q past flat (theta < 0) swings P2's lower slit edge into P1."""
+    m = slit_model()
+    settings = CollisionSettings()
+    mon = CollisionMonitor(m, settings)
+    i = [m.hinges[h].name for h in m.joints].index("G-Q")
+    theta = np.zeros(3)
+    mon.update(0.0, theta, np.zeros(3))
+    events, depth_seen = [], []
+    for j, phi in enumerate(np.linspace(0.0, 0.2, 21)[1:], start=1):
+        theta[i] = -phi
+        events += mon.update(0.01 * j, theta)
+        depth_seen.append(mon.distances[mon.pairs.tolist().index([1, 3])])
+    assert events and events[0].names == ("P1", "P2")
+    assert events[0].distance < -settings.tolerance
+    # no event while the interference was within the tolerance
+    first = events[0].sample
+    assert all(d >= -settings.tolerance for d in depth_seen[: first - 1])
+
+
+def test_stowed_paper_design_is_at_rest_without_collision():
+    from pathlib import Path
+    from panel_deploy.build import build_model
+    from panel_deploy.model import State
+    from panel_deploy.scene import load_scene
+
+    scene = Path(__file__).resolve().parent.parent / "config" / "scenes" / "paper_4x4.yaml"
+    m = build_model(load_scene(scene))
+    mon = CollisionMonitor(m, CollisionSettings(margin=math.inf))
+    s = State.stowed(m)
+    for t in (0.0, 0.01, 0.02):
+        assert mon.update(t, s.theta, s.omega) == []
+    touching = np.abs(mon.distances) < 1e-9
+    assert touching.any()                              # the stacks touch by design
+    assert np.all(mon.distances >= -mon.settings.tolerance)
+    assert np.all(mon.resting[touching])               # and are left out of d
+    assert mon.min_distance >= mon.settings.tolerance

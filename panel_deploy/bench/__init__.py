@@ -1,0 +1,9 @@
+"""Benchmarks of issue 3: work-precision against MuJoCo, and the stiff-case suite.
+
+Library code for ``panel-deploy bench ...`` and the scripts in ``bench/``;
+timings are printed and written, never asserted.
+"""
+
+from .work_precision import work_precision, work_precision_command
+
+__all__ = ["work_precision", "work_precision_command"]

@@ -68,8 +68,13 @@ def cmd_simulate(args):
 
 
 def cmd_collide(args):
-    from .run import collide_command
+    from .collision import collide_command
     return collide_command(args)
+
+
+def cmd_optimise(args):
+    from .optimise import optimise_command
+    return optimise_command(args, _load(args))
 
 
 def cmd_export(args):
@@ -80,6 +85,16 @@ def cmd_export(args):
 def cmd_bench(args):
     from .bench import work_precision_command
     return work_precision_command(args, _load(args))
+
+
+def _stiffness_list(text):
+    try:
+        values = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}") from None
+    if not values or any(not v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f"expected stiffnesses > 0 N m/rad, got {text!r}")
+    return values
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -113,6 +128,21 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("trajectory", help="trajectory .npz written by simulate --out")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_collide)
+
+    s = sub.add_parser("optimise", help="hinge stiffnesses for a collision-free deployment (Eq. 8)")
+    s.add_argument("scene")
+    s.add_argument("--out", metavar="RESULT.yaml", help="result file (default: print it)")
+    s.add_argument("--workers", type=int, help="parallel evaluations (default: all cores)")
+    s.add_argument("--dask", metavar="ADDRESS", help="run evaluations on this Dask scheduler")
+    s.add_argument("--method", choices=("local", "global"), help="override optimisation.method")
+    s.add_argument("--max-evaluations", type=int, help="override optimisation.max_evaluations")
+    s.add_argument("--springs", type=_stiffness_list,
+                   help="available spring stiffnesses, N m/rad, comma-separated")
+    s.add_argument("--perturb", type=int, default=0, help="tolerance check: perturbed copies")
+    s.add_argument("--perturb-tol", type=float, default=0.05, help="relative spread of k and c")
+    s.add_argument("--quiet", action="store_true", help="no progress lines")
+    s.add_argument("--json", action="store_true", help="print the result as JSON")
+    s.set_defaults(func=cmd_optimise)
 
     s = sub.add_parser("export", help="export the model (MuJoCo MJCF)")
     s.add_argument("scene")

@@ -1,0 +1,55 @@
+"""The ``simulate`` job behind the CLI: scene -> model -> simulation -> collision check."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+from .errors import SceneError
+
+
+def apply_overrides(scene, args):
+    """The scene with the command line's --method, --closure and --t-end applied."""
+    sim, closure = scene.simulation, scene.closure
+    if getattr(args, "method", None):
+        from .scene import INTEGRATORS
+        if args.method not in INTEGRATORS:
+            raise SceneError("--method", f"expected one of {', '.join(INTEGRATORS)}, got {args.method!r}")
+        sim = replace(sim, method=args.method)
+    if getattr(args, "t_end", None) is not None:
+        if not args.t_end > 0:
+            raise SceneError("--t-end", f"expected a number > 0, got {args.t_end}")
+        sim = replace(sim, t_end=args.t_end)
+    if getattr(args, "closure", None):
+        closure = replace(closure, method=args.closure)
+    return scene.replace(simulation=sim, closure=closure)
+
+
+def simulate_scene(scene, stiffness_file=None):
+    """Simulate a scene and check it for collisions: (model, result, report)."""
+    from .build import build_model
+    from .collision import CollisionSettings, check_trajectory
+    from .dynamics import simulate
+
+    model = build_model(scene)
+    if stiffness_file:
+        from .optimise import load_stiffness
+        model = model.with_stiffness(load_stiffness(stiffness_file, model))
+    result = simulate(model, scene.simulation)
+    report = check_trajectory(model, result, CollisionSettings.from_scene(scene))
+    return model, result, report
+
+
+def simulate_command(args, scene) -> int:
+    """``panel-deploy simulate``: print the summary; exit 0 when the run succeeded, 1 if not."""
+    from .summary import deployment_summary, summary_text
+
+    scene = apply_overrides(scene, args)
+    model, result, report = simulate_scene(scene, args.stiffness)
+    if args.out:
+        from .trajectory_io import save_trajectory
+        save_trajectory(args.out, result, scene, model)
+    summary = deployment_summary(model, result, report)
+    summary["scene"] = scene.name or scene.source
+    print(json.dumps(summary) if args.json else summary_text(summary))
+    return 0 if result.success else 1

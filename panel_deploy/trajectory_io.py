@@ -74,6 +74,8 @@ def load_trajectory(path):
     path = Path(path)
     if not path.exists():
         raise TrajectoryError(f"{path}: trajectory file not found")
+    if not zipfile.is_zipfile(path):
+        raise TrajectoryError(f"{path}: not a trajectory file (expected an .npz archive)")
     try:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}

@@ -235,3 +235,21 @@ def test_stowed_paper_design_is_at_rest_without_collision():
     assert np.all(mon.distances >= -mon.settings.tolerance)
     assert np.all(mon.resting[touching])               # and are left out of d
     assert mon.min_distance >= mon.settings.tolerance
+    # Nothing has cleared the 8-layer package (h = 7 t + t = 0.04 m) yet: the stack
+    # spacing is not d.
+    assert mon.package_height == pytest.approx(8 * 0.005)
+    assert np.all(mon.resting) and mon.min_distance == math.inf
+
+
+def test_d_counts_a_pair_once_it_has_cleared_the_package():
+    # Two panels folded onto a ground panel (fold_model) start one package apart;
+    # d must not count the start but must count the closest approach after they part.
+    m = fold_model()
+    mon = CollisionMonitor(m, CollisionSettings(margin=math.inf))
+    mon.update(0.0, [math.pi, 0.0])
+    assert mon.min_distance == math.inf
+    h = mon.package_height
+    for t, th in ((0.1, 2.0), (0.2, 1.0), (0.3, 0.0)):
+        mon.update(t, [th, 0.0])
+    assert not mon.resting.any()
+    assert mon.min_distance == pytest.approx(mon.distances[0]) and mon.distances[0] > h

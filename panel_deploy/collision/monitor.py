@@ -19,10 +19,16 @@ through each other, so a real impact keeps going into interference and
 crosses the tolerance within about tolerance / approach speed after the
 first touch; the event also gives that first touch (``contact_time``).
 
-The smallest distance ``d`` leaves out these designed contacts: a pair
-counts towards d at a sample unless it touches (sd <= tolerance) in the flat
-state, or has touched ever since release without yet separating beyond the
-tolerance. Those pairs are still checked for collisions.
+The smallest distance ``d`` leaves out these designed contacts and the
+stowed package itself: a pair counts towards d at a sample unless it touches
+(sd <= tolerance) in the flat state, or has not yet cleared the package. With
+h the height of the package at release (the first update: spread of the body
+centroids along the ground normal plus the largest panel thickness), a pair
+has cleared it once its distance exceeds its release distance by more than h,
+or from the start if it was more than h apart at release. In the stowed stacks
+every pair is at most h apart, so without this rule d would be the stack
+spacing for every K and Eq. (8)'s -q d could not rank collision-free designs.
+Pairs that have not cleared the package are still checked for collisions.
 
 Between samples
 ---------------
@@ -196,7 +202,10 @@ class CollisionMonitor:
     flat_contact : (P,) ndarray of bool
         Pairs touching in the flat state (left out of d).
     resting : (P,) ndarray of bool or None
-        Pairs in contact ever since the first update.
+        Pairs that have not cleared the stowed package (see the module
+        docstring); None before the first update.
+    package_height : float
+        h of the module docstring, m (nan before the first update).
     colliding : (P,) ndarray of bool
         Pairs with sd < -tolerance at the last update.
     distances : (P,) ndarray
@@ -226,6 +235,7 @@ class CollisionMonitor:
         rows = np.arange(len(self.pairs))
         self.flat_contact = self._distances_at(flat, rows) <= self.settings.tolerance
         self.resting = None
+        self.package_height = math.nan
         self.colliding = np.zeros(len(self.pairs), dtype=bool)
         self.distances = np.full(len(self.pairs), np.inf)
         self.exact = np.zeros(len(self.pairs), dtype=bool)
@@ -286,7 +296,9 @@ class CollisionMonitor:
         self._boxes.set_poses(R, p)
         D, exact = self._sample_distances()
         if self.resting is None:
-            self.resting = D <= self.settings.tolerance
+            self.package_height = float(np.ptp(p[:, 2]) + max(b.size[2] for b in self.model.bodies))
+            self._release = D + self.package_height
+            self.resting = D <= self.package_height
         cur = _Sample(t, theta, omega, D, exact, linear, self._speed.radii(R, p))
 
         tol = self.settings.tolerance
@@ -298,7 +310,7 @@ class CollisionMonitor:
         events.sort(key=lambda e: e.t)
 
         self.colliding = D < -tol
-        self.resting &= ~(D > tol)
+        self.resting &= ~(D > self._release)
         self.distances, self.exact = D, exact
         counts = np.flatnonzero(exact & ~self.flat_contact & ~self.resting)
         self.min_pair = int(counts[np.argmin(D[counts])]) if counts.size else -1

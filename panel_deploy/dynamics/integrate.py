@@ -6,7 +6,10 @@ loop by stepping exactly onto them), stop explicitly on failure, and can locate
 the contact switches (a tree hinge crossing theta = 0 or pi, where Eq. 4 changes
 the torque law) so that no step straddles one: a step that crosses a switch is
 redone to end on it. Switches in the first or last 0.1 % of a step are left
-alone (the step is already at the switch). Cut-hinge angles are not state
+alone (the step is already at the switch), and so is a switch in the step right
+after a located one: a hinge resting on its limit chatters across it, and
+locating every crossing would stall the run (Zeno), as it did at t = 0 on the
+paper scene. Cut-hinge angles are not state
 variables, so their switches are not located.
 """
 
@@ -72,9 +75,15 @@ def _hermite(th0, w0, th1, w1, h, s):
 
 
 @njit(cache=True)
-def first_switch(n, y0, y1, h):
+def first_switch(n, y0, y1, h, tol):
     """Fraction of the step (0..1) at which the first tree hinge changes contact
-    mode, by bisection on the cubic Hermite interpolant of theta; 2.0 if none."""
+    mode, by bisection on the cubic Hermite interpolant of theta; 2.0 if none.
+
+    Crossings that stay within ``tol`` (rad) of the limit are ignored: the kink
+    they cause is below the integration tolerance, and a hinge held on its limit
+    (e.g. locked by the loop at the singular stowed state) crosses it at
+    round-off amplitude on every step.
+    """
     m0 = _modes(y0[:n])
     m1 = _modes(y1[:n])
     best = 2.0
@@ -83,6 +92,8 @@ def first_switch(n, y0, y1, h):
             continue
         b = _boundary(m0[i], m1[i])
         g0 = y0[i] - b
+        if max(abs(g0), abs(y1[i] - b)) <= tol:
+            continue
         lo, hi = 0.0, 1.0
         for _ in range(50):
             mid = 0.5 * (lo + hi)
@@ -161,6 +172,7 @@ def dopri5(P, y0, t_eval, rtol, atol, max_step, locate, max_steps, gap_limit):
     K = np.empty((7, N))
     nsteps = 0
     nswitches = 0
+    landed = False  # the last step was shortened onto a switch: do not locate in the next
     j = 1
     while j < s:
         if not np.all(np.isfinite(f)):
@@ -188,13 +200,13 @@ def dopri5(P, y0, t_eval, rtol, atol, max_step, locate, max_steps, gap_limit):
         elif en > 1.0:
             h = step * max(0.2, 0.9 * en ** -0.2)
         else:
-            frac = first_switch(n, y, y1, step) if locate else 2.0
+            frac = first_switch(n, y, y1, step, atol) if locate and not landed else 2.0
             if EDGE < frac < 1.0 - EDGE:
                 h = frac * step
                 nswitches += 1
-                if nswitches >= max_steps:
-                    return Y, -1, 4, nfev, nsteps, nswitches
+                landed = True
                 continue
+            landed = False
             t = target if lands else t + step
             y = y1
             f = K[6].copy()
@@ -258,6 +270,7 @@ def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit) -> Integratio
     status, message = 0, "reached t_end"
     t, y, bound = t_eval[0], y0, t_end
     solver = cls(fun, t, y, bound, **opts)
+    landed = False  # as in dopri5: after a located switch the next step is free
     while j < len(t_eval):
         if solver.status == "finished":
             nlu += getattr(solver, "nlu", 0)
@@ -274,16 +287,18 @@ def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit) -> Integratio
             status, message = -1, f"non-finite state at t = {solver.t:.6g} s"
             break
         nsteps += 1
-        if settings.events:
-            frac = first_switch(n, y_old, y_new, solver.t - t_old)
-            if EDGE < frac < 1.0 - EDGE and nsw < max_steps:
+        if settings.events and not landed:
+            frac = first_switch(n, y_old, y_new, solver.t - t_old, settings.atol)
+            if EDGE < frac < 1.0 - EDGE:
                 dt = solver.t - t_old
                 t_sw = _refine_switch(solver.dense_output(), n, y_old, y_new, t_old, solver.t, frac)
                 if EDGE * dt < t_sw - t_old < (1.0 - EDGE) * dt:
                     nsw += 1
                     nlu += getattr(solver, "nlu", 0)
                     solver = cls(fun, t_old, y_old, t_sw, **opts)
+                    landed = True
                     continue
+        landed = False
         sol = solver.dense_output()
         while j < len(t_eval) and t_eval[j] <= solver.t:
             out.append(sol(t_eval[j]))

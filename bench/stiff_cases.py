@@ -6,9 +6,12 @@ Writes bench/results/stiff_cases{,_quick}.{csv,md} and prints the outcome table.
 """
 
 import argparse
+import sys
 from pathlib import Path
 
-from panel_deploy.bench.stiff import stiff_command
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from panel_deploy.bench.stiff import stiff_command  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 

@@ -8,9 +8,12 @@ panel_deploy.bench.work_precision for what is measured).
 """
 
 import argparse
+import sys
 from pathlib import Path
 
-from panel_deploy.bench.work_precision import work_precision_command
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from panel_deploy.bench.work_precision import work_precision_command  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

@@ -1,7 +1,7 @@
 """Stiff and ill-conditioned cases: does every integrator succeed, or fail loudly?
 
 Each case is the base model with one thing pushed to an extreme (contact
-stiffness k_s, penalty stiffness k_M = k_N, no damping, a 200:1 spread of hinge
+stiffness k_s, penalty stiffness k_M = k_N (also overdamped), no damping, a 200:1 spread of hinge
 stiffness, no or 10 g gravity, a 1000:1 mass ratio, bigger arrays). Every
 integrator runs every case from the exactly folded stowed state (a singular
 configuration of the closed loop, NOTES.md section 6); the outcome is
@@ -97,6 +97,9 @@ def stiff_cases(full: bool = True) -> list[StiffCase]:
     cases += [StiffCase(f"k_M={v:.0e}", f"penalty stiffness k_M = k_N = {v:g} N/m",
                         lambda m, v=v: _closure(m, k_M=v, k_N=v)) for v in k_M]
     cases += [
+        StiffCase("k_M=1e8 c_M=2e4", "penalty k_M = k_N = 1e8 N/m, overdamped c_M = c_N = 2e4 N s/m: "
+                  "a fast decaying mode (about -c_M / m ~ -1e6 1/s), the classic stiff case",
+                  lambda m: _closure(m, k_M=1e8, k_N=1e8, c_M=2e4, c_N=2e4)),
         StiffCase("undamped", "c = c_s = c_M = c_N = 0", _undamped),
         StiffCase("k 0.001/0.2", "hinges on the ground 0.001, others 0.2 N m/rad (c follows k)",
                   lambda m: _split_stiffness(m, 0.001, 0.2)),
@@ -134,7 +137,8 @@ def reference(model: Model, base: SimulationSection, rtol: float = 1e-10,
 
 
 def run_case(model: Model, base: SimulationSection, case: StiffCase, methods=INTEGRATORS,
-             max_steps: int = 100_000, verbose: bool = False) -> list[Outcome]:
+             max_steps: int = 100_000, verbose: bool = False,
+             reference_rtol: float = 1e-10) -> list[Outcome]:
     """Every method on one case, with its error against :func:`reference`.
 
     ``max_steps`` is every run's step budget: a method that needs more fails
@@ -144,7 +148,7 @@ def run_case(model: Model, base: SimulationSection, case: StiffCase, methods=INT
     from ..dynamics.simulate import simulate
 
     m = case.make(model)
-    ref = reference(m, base, max_steps=2 * max_steps)
+    ref = reference(m, base, reference_rtol, max_steps=max(200_000, 10 * max_steps))
     out = []
     for method in methods:
         start = time.perf_counter()
@@ -168,16 +172,17 @@ def run_case(model: Model, base: SimulationSection, case: StiffCase, methods=INT
 
 
 def run_suite(models: dict, base: SimulationSection, cases, methods=INTEGRATORS,
-              max_steps: int = 100_000, verbose: bool = False) -> list[Outcome]:
+              max_steps: int = 100_000, verbose: bool = False,
+              reference_rtol: float = 1e-10) -> list[Outcome]:
     """``models``: label -> Model. Every case runs on the first model; the
     other models (bigger arrays) run as they are."""
     (label, first), *others = models.items()
     out = []
     for case in cases:
-        out += run_case(first, base, case, methods, max_steps, verbose)
+        out += run_case(first, base, case, methods, max_steps, verbose, reference_rtol)
     for label, model in others:
         out += run_case(model, base, StiffCase(label, f"{label} array", lambda m: m), methods,
-                        max_steps, verbose)
+                        max_steps, verbose, reference_rtol)
     return out
 
 

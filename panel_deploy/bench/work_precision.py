@@ -101,7 +101,8 @@ def _timed(run, repeats):
     return statistics.median(times), result
 
 
-def reference_solution(model: Model, base: SimulationSection, window: float, rtol: float = 1e-12):
+def reference_solution(model: Model, base: SimulationSection, window: float, rtol: float = 1e-12,
+                       max_steps: int = 2_000_000):
     """Tight DOP853 reference and its spread against one at 10 x ``rtol``.
 
     Returns ``(result, spread, wall_time)``; spread in rad.
@@ -109,32 +110,48 @@ def reference_solution(model: Model, base: SimulationSection, window: float, rto
     from ..dynamics.simulate import simulate
 
     start = time.perf_counter()
-    ref = simulate(model, _settings(base, window, method="DOP853", rtol=rtol, atol=rtol * 1e-2))
+    ref = simulate(model, _settings(base, window, method="DOP853", rtol=rtol, atol=rtol * 1e-2),
+                   max_steps=max_steps)
     wall = time.perf_counter() - start
-    loose = simulate(model, _settings(base, window, method="DOP853", rtol=10 * rtol, atol=rtol * 1e-1))
+    loose = simulate(model, _settings(base, window, method="DOP853", rtol=10 * rtol, atol=rtol * 1e-1),
+                     max_steps=max_steps)
     if not (ref.success and loose.success):
         raise RuntimeError(f"reference solution failed: {ref.message} / {loose.message}")
     return ref, _errors(loose.theta, ref.theta)[0], wall
 
 
-def sweep_ours(model, base, window, methods, rtols, repeats, ref_theta):
-    """Time every method at every rtol (atol = rtol / 100) against ``ref_theta``."""
+def sweep_ours(model, base, window, methods, rtols, repeats, ref_theta, max_steps, verbose):
+    """Time every method at every rtol (atol = rtol / 100) against ``ref_theta``.
+
+    A method that fails at one rtol is not run at tighter ones (it would only
+    burn its step budget again).
+    """
     from ..dynamics.simulate import simulate
 
     points = []
     for method in methods:
         # the first call of a method compiles its kernels: keep it out of the timing
-        simulate(model, _settings(base, window, method=method, rtol=1e-3, atol=1e-5))
+        simulate(model, _settings(base, window, method=method, rtol=1e-3, atol=1e-5),
+                 max_steps=max_steps)
         for rtol in rtols:
             settings = _settings(base, window, method=method, rtol=rtol, atol=rtol * 1e-2)
-            wall, r = _timed(lambda: simulate(model, settings), repeats)
+            wall, r = _timed(lambda: simulate(model, settings, max_steps=max_steps), repeats)
             err, final = _errors(r.theta, ref_theta) if r.success else (math.nan, math.nan)
             points.append(Point("ours", method, rtol, wall, r.nfev, r.nsteps, err, final,
                                 bool(r.success), r.message))
+            _report(points[-1], verbose)
+            if not r.success:
+                break
     return points
 
 
-def sweep_mujoco(model, window, steps, repeats, ref_theta):
+def _report(p, verbose):
+    if verbose:
+        print(f"  {p.simulator:6} {p.method:12} {p.setting:8.1e} {p.wall_time:9.3f} s "
+              f"err {p.max_error:9.2e}  {'ok' if p.success else p.message}", flush=True)
+
+
+def sweep_mujoco(model, window, steps, repeats, ref_theta, verbose):
     """Time MuJoCo at every (integrator, step) of ``steps`` against ``ref_theta``."""
     samples = int(round(window / SAMPLE_INTERVAL)) + 1
     points = []
@@ -144,6 +161,7 @@ def sweep_mujoco(model, window, steps, repeats, ref_theta):
             err, final = _errors(r.theta, ref_theta) if r.success else (math.nan, math.nan)
             points.append(Point("mujoco", integrator, h, wall, 0, r.nsteps, err, final,
                                 r.success, r.message))
+            _report(points[-1], verbose)
     return points
 
 
@@ -171,12 +189,19 @@ def time_at_error(points, target: float):
 
 
 def work_precision(model: Model, base: SimulationSection, *, window=DEFAULT_WINDOW,
-                   quick=False, repeats=3, methods=INTEGRATORS, mujoco=True) -> WorkPrecision:
-    """Run the whole work-precision sweep on ``model``; see the module doc."""
+                   quick=False, repeats=3, methods=INTEGRATORS, mujoco=True,
+                   max_steps=200_000, verbose=False) -> WorkPrecision:
+    """Run the whole work-precision sweep on ``model``; see the module doc.
+
+    ``max_steps`` is the step budget of every run of ours (not the reference).
+    """
     rtols = QUICK_RTOLS if quick else FULL_RTOLS
     steps = QUICK_STEPS if quick else FULL_STEPS
     ref, spread, ref_wall = reference_solution(model, base, window, 1e-10 if quick else 1e-12)
-    points = sweep_ours(model, base, window, methods, rtols, repeats, ref.theta)
+    if verbose:
+        print(f"reference: DOP853 rtol {1e-10 if quick else 1e-12:g}, {ref_wall:.2f} s, "
+              f"spread {spread:.2e} rad", flush=True)
+    points = sweep_ours(model, base, window, methods, rtols, repeats, ref.theta, max_steps, verbose)
     mj_spread = ours_vs_mujoco = math.nan
     notes = [f"window 0..{window:g} s (fixed: first collision not used), samples every "
              f"{SAMPLE_INTERVAL:g} s"]
@@ -188,7 +213,10 @@ def work_precision(model: Model, base: SimulationSection, *, window=DEFAULT_WIND
         if mj_ref.success and mj_check.success:
             mj_spread = _errors(mj_check.theta, mj_ref.theta)[0]
             ours_vs_mujoco = _errors(ref.theta, mj_ref.theta)[0]
-            points += sweep_mujoco(model, window, steps, repeats, mj_ref.theta)
+            if verbose:
+                print(f"MuJoCo reference: RK4 step {h_ref:g} s, {mj_ref.wall_time:.2f} s, "
+                      f"spread {mj_spread:.2e} rad", flush=True)
+            points += sweep_mujoco(model, window, steps, repeats, mj_ref.theta, verbose)
         else:
             notes.append(f"MuJoCo reference at {h_ref:g} s failed: {mj_ref.message}")
     return WorkPrecision(window, points, spread, mj_spread, ours_vs_mujoco, ref_wall, notes)
@@ -271,7 +299,7 @@ def work_precision_command(args, scene=None) -> int:
 
     scene = scene if scene is not None else load_scene(args.scene)
     report = work_precision(build_model(scene), scene.simulation, quick=args.quick,
-                            repeats=args.repeats)
+                            repeats=args.repeats, verbose=True)
     write_csv(report, args.out)
     plot(report, args.plot)
     print(summary(report))

@@ -1,10 +1,13 @@
 """Deployment dynamics of a panel array: compiled recursive multibody kernels,
 penalty or exact loop closure, scipy or compiled integrators.
 
-``simulate(model, settings, state=None) -> SimulationResult``.
+``simulate(model, settings, state=None) -> SimulationResult``; reports from a
+result: ``hinge_release_report``, ``summary``, ``energy_balance_error``.
 """
 
+from .report import energy_balance_error, hinge_release_report, summary
 from .result import SimulationResult
 from .simulate import default_gap_limit, simulate
 
-__all__ = ["SimulationResult", "simulate", "default_gap_limit"]
+__all__ = ["SimulationResult", "simulate", "default_gap_limit", "hinge_release_report",
+           "summary", "energy_balance_error"]

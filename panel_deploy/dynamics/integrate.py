@@ -115,7 +115,7 @@ def max_gap(P, y):
     out = 0.0
     for j in range(gap.shape[0]):
         for e in range(2):
-            out = max(out, math.sqrt(gap[j, e] @ gap[j, e]))
+            out = max(out, math.sqrt(kernels._dot(gap[j, e], gap[j, e])))
     return out
 
 

@@ -63,6 +63,47 @@ def contact_mode(theta):
 
 
 @njit(cache=True)
+def _dot(a, b):
+    s = 0.0
+    for i in range(a.shape[0]):
+        s += a[i] * b[i]
+    return s
+
+
+@njit(cache=True)
+def _mv(A, x):
+    """A @ x for small arrays without a BLAS call (whose overhead dominates here)."""
+    out = np.zeros(A.shape[0])
+    for i in range(A.shape[0]):
+        s = 0.0
+        for j in range(A.shape[1]):
+            s += A[i, j] * x[j]
+        out[i] = s
+    return out
+
+
+@njit(cache=True)
+def _vm(x, A):
+    """x @ A for small arrays."""
+    out = np.zeros(A.shape[1])
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            out[j] += x[i] * A[i, j]
+    return out
+
+
+@njit(cache=True)
+def _mm(A, B):
+    out = np.zeros((A.shape[0], B.shape[1]))
+    for i in range(A.shape[0]):
+        for k in range(A.shape[1]):
+            a = A[i, k]
+            for j in range(B.shape[1]):
+                out[i, j] += a * B[k, j]
+    return out
+
+
+@njit(cache=True)
 def _cross(a, b):
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
                      a[0] * b[1] - a[1] * b[0]])
@@ -110,10 +151,10 @@ def kinematics(P, theta, omega):
     for i in range(n):
         a = P.parent[i]
         Ra = R[a]
-        R[i] = Ra @ _rotation(P.axis[i], theta[i])
-        h = p[a] + Ra @ (P.point[i] - P.r0[a])
-        u = Ra @ P.axis[i]
-        p[i] = h + R[i] @ (P.r0[i] - P.point[i])
+        R[i] = _mm(Ra, _rotation(P.axis[i], theta[i]))
+        h = p[a] + _mv(Ra, P.point[i] - P.r0[a])
+        u = _mv(Ra, P.axis[i])
+        p[i] = h + _mv(R[i], P.r0[i] - P.point[i])
         S[i, :3] = u
         S[i, 3:] = _cross(h, u)
         w[i] = w[a] + u * omega[i]
@@ -126,7 +167,7 @@ def _spatial_inertia(m, Ic, c):
     """6x6 spatial inertia about the ground origin of a body of mass m, centroid c."""
     C = np.array([[0.0, -c[2], c[1]], [c[2], 0.0, -c[0]], [-c[1], c[0], 0.0]])
     out = np.empty((6, 6))
-    out[:3, :3] = Ic - m * (C @ C)
+    out[:3, :3] = Ic - m * _mm(C, C)
     out[:3, 3:] = m * C
     out[3:, :3] = -m * C
     out[3:, 3:] = m * np.eye(3)
@@ -163,11 +204,11 @@ def _cut_angle(P, j, R):
     rotation about the axis), so torque and energy stay consistent.
     """
     a, b = P.cut_a[j], P.cut_b[j]
-    f = R[b] @ P.cut_e1[j]
-    e1 = R[a] @ P.cut_e1[j]
-    e2 = R[a] @ P.cut_e2[j]
-    x = e1 @ f
-    y = e2 @ f
+    f = _mv(R[b], P.cut_e1[j])
+    e1 = _mv(R[a], P.cut_e1[j])
+    e2 = _mv(R[a], P.cut_e2[j])
+    x = _dot(e1, f)
+    y = _dot(e2, f)
     theta = math.atan2(y, x)
     if theta < -0.5 * PI:
         theta += 2.0 * PI
@@ -191,7 +232,7 @@ def cut_geometry(P, R, p, w, vo):
             body = P.cut_a[j] if s == 0 else P.cut_b[j]
             for e in range(2):
                 end = P.cut_point[j] + e * P.cut_length[j] * P.cut_axis[j]
-                x = p[body] + R[body] @ (end - P.r0[body])
+                x = p[body] + _mv(R[body], end - P.r0[body])
                 pts[j, 2 * s + e] = x
         for e in range(2):
             gap[j, e] = pts[j, 2 + e] - pts[j, e]
@@ -233,7 +274,7 @@ def cut_forces(P, R, p, w, vo):
     for j in range(P.cut_a.shape[0]):
         a, b = P.cut_a[j], P.cut_b[j]
         theta, g = _cut_angle(P, j, R)
-        omega = g @ (w[b] - w[a])
+        omega = _dot(g, w[b] - w[a])
         tau, e, pw = hinge_law(theta, omega, P.cut_k[j], P.cut_c[j], P.k_s, P.c_s)
         energy += e
         power += pw
@@ -243,19 +284,19 @@ def cut_forces(P, R, p, w, vo):
             continue
         dM, vM = gap[j, 0], rate[j, 0]
         fM = -P.k_M * dM - P.c_M * vM
-        energy += 0.5 * P.k_M * (dM @ dM)
-        power += P.c_M * (vM @ vM)
+        energy += 0.5 * P.k_M * _dot(dM, dM)
+        power += P.c_M * _dot(vM, vM)
         _add_wrench(F, b, zero, fM, pts[j, 2])
         _add_wrench(F, a, zero, -fM, pts[j, 0])
-        u = R[a] @ P.cut_axis[j]
+        u = _mv(R[a], P.cut_axis[j])
         dN, vN = gap[j, 1], rate[j, 1]
-        dNp = dN - u * (u @ dN)
-        vNp = vN - u * (u @ vN)
+        dNp = dN - u * _dot(u, dN)
+        vNp = vN - u * _dot(u, vN)
         fN = -P.k_N * dNp - P.c_N * vNp
-        energy += 0.5 * P.k_N * (dNp @ dNp)
-        power += P.c_N * (vNp @ vNp)
+        energy += 0.5 * P.k_N * _dot(dNp, dNp)
+        power += P.c_N * _dot(vNp, vNp)
         _add_wrench(F, b, zero, fN, pts[j, 3])
-        _add_wrench(F, a, P.k_N * (u @ dN) * _cross(u, dN), -fN, pts[j, 1])
+        _add_wrench(F, a, P.k_N * _dot(u, dN) * _cross(u, dN), -fN, pts[j, 1])
     return F, energy, power
 
 
@@ -304,13 +345,13 @@ def closure_jacobian(P, R, p, w, vo, S, acc):
             aN = (_point_bias_acceleration(acc[b], w[b], vo[b], pts[j, 3])
                   - _point_bias_acceleration(acc[a], w[a], vo[a], pts[j, 1]))
         for k in range(2):
-            e = R[a] @ (P.cut_e1[j] if k == 0 else P.cut_e2[j])
-            c[r + 3 + k] = e @ dN
-            J[r + 3 + k] = e @ JN + _cross(e, dN) @ Jw
+            e = _mv(R[a], P.cut_e1[j] if k == 0 else P.cut_e2[j])
+            c[r + 3 + k] = _dot(e, dN)
+            J[r + 3 + k] = _vm(e, JN) + _vm(_cross(e, dN), Jw)
             if with_gamma:
                 edot = _cross(w[a], e)
                 eddot = _cross(acc[a, :3], e) + _cross(w[a], edot)
-                gamma[r + 3 + k] = e @ aN + 2.0 * (edot @ vN) + eddot @ dN
+                gamma[r + 3 + k] = _dot(e, aN) + 2.0 * _dot(edot, vN) + _dot(eddot, dN)
     return c, J, gamma
 
 
@@ -364,7 +405,7 @@ def mass_and_bias(P, theta, omega):
     R, p, w, vo, S = kinematics(P, theta, omega)
     I6 = np.empty((n, 6, 6))
     for i in range(n):
-        Ic = R[i] @ P.inertia[i] @ R[i].T
+        Ic = _mm(_mm(R[i], P.inertia[i]), R[i].T)
         I6[i] = _spatial_inertia(P.mass[i], Ic, p[i])
 
     comp = I6.copy()
@@ -373,11 +414,11 @@ def mass_and_bias(P, theta, omega):
             comp[P.parent[i]] += comp[i]
     M = np.zeros((n, n))
     for i in range(n):
-        Fi = comp[i] @ S[i]
-        M[i, i] = S[i] @ Fi
+        Fi = _mv(comp[i], S[i])
+        M[i, i] = _dot(S[i], Fi)
         j = P.parent[i]
         while j < n:
-            M[i, j] = M[j, i] = S[j] @ Fi
+            M[i, j] = M[j, i] = _dot(S[j], Fi)
             j = P.parent[j]
 
     if P.method != TREE:
@@ -397,22 +438,22 @@ def mass_and_bias(P, theta, omega):
         acc[i, 3:] = acc[a, 3:] + (_cross(w[a], s[3:]) + _cross(vo[a], s[:3])) * omega[i]
         V[:3] = w[i]
         V[3:] = vo[i]
-        h = I6[i] @ V
-        fi = I6[i] @ acc[i]
+        h = _mv(I6[i], V)
+        fi = _mv(I6[i], acc[i])
         fi[:3] += _cross(w[i], h[:3]) + _cross(vo[i], h[3:])
         fi[3:] += _cross(w[i], h[3:])
         if P.has_gravity:
             fg = P.mass[i] * P.gravity
             fi[:3] -= _cross(p[i], fg)
             fi[3:] -= fg
-            gravity_energy -= fg @ (p[i] - P.r0[i])
+            gravity_energy -= _dot(fg, p[i] - P.r0[i])
         f[i] += fi
     Q = np.empty(n)
     for i in range(n - 1, -1, -1):
         tau, e, pw = hinge_law(theta[i], omega[i], P.k[i], P.c[i], P.k_s, P.c_s)
         spring += e
         dissipation += pw
-        Q[i] = tau - S[i] @ f[i]
+        Q[i] = tau - _dot(S[i], f[i])
         if P.parent[i] < n:
             f[P.parent[i]] += f[i]
     return M, Q, (R, p, w, vo, S), acc, spring, dissipation, gravity_energy
@@ -438,13 +479,13 @@ def rhs(P, y):
         R, p, w, vo, S = kin
         c, J, gamma = closure_jacobian(P, R, p, w, vo, S, acc)
         mc = c.shape[0]
-        cdot = J @ omega
+        cdot = _mv(J, omega)
         T = P.baumgarte
         target = -gamma - (2.0 / T) * cdot - c / (T * T)
         Y = np.empty((n, mc))
         for r in range(mc):
             Y[:, r] = _cholesky_solve(L, J[r].copy())
-        A = J @ Y
+        A = _mm(J, Y)
         scale = 0.0
         for r in range(mc):
             scale = max(scale, A[r, r])
@@ -454,9 +495,9 @@ def rhs(P, y):
         if not ok:
             dy[:] = np.nan
             return dy
-        lam = _cholesky_solve(LA, target - J @ qdd)
-        qdd = qdd + Y @ lam
-        dy[2 * n + 1] = lam @ cdot
+        lam = _cholesky_solve(LA, target - _mv(J, qdd))
+        qdd = qdd + _mv(Y, lam)
+        dy[2 * n + 1] = _dot(lam, cdot)
     dy[n:2 * n] = qdd
     return dy
 
@@ -486,14 +527,14 @@ def observe(P, y):
     theta = y[:n]
     omega = y[n:2 * n]
     M, Q, kin, acc, spring, dissipation, gravity_energy = mass_and_bias(P, theta, omega)
-    kinetic = 0.5 * omega @ (M @ omega)
+    kinetic = 0.5 * _dot(omega, _mv(M, omega))
     R, p, w, vo, S = kin
     gap = 0.0
     if P.method != TREE:
         pts, d, rate = cut_geometry(P, R, p, w, vo)
         for j in range(d.shape[0]):
             for e in range(2):
-                gap = max(gap, math.sqrt(d[j, e] @ d[j, e]))
+                gap = max(gap, math.sqrt(_dot(d[j, e], d[j, e])))
         c, J, gamma = closure_jacobian(P, R, p, w, vo, S, np.zeros((0, 6)))
     else:
         J = np.zeros((0, n))

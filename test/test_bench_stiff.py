@@ -91,3 +91,19 @@ def test_case_variants_change_only_what_they_name():
     assert ks == {0.001, 0.2}
     for h, h0 in zip(split.hinges, model.hinges):
         assert h.c / h.k == pytest.approx(h0.c / h0.k)  # Rayleigh: c follows k
+
+
+def test_time_at_equal_error_interpolates_each_method_in_log_log():
+    from panel_deploy.bench.work_precision import Point, time_at_error
+
+    def point(method, wall, error, success=True):
+        return Point("ours", method, 0.0, wall, 0, 0, error, error, success, "")
+
+    points = [point("A", 1.0, 1e-2), point("A", 10.0, 1e-4), point("A", 0.5, 1e-1),
+              point("B", 0.1, 1.0), point("B", 0.2, math.nan, success=False)]
+    # straight line in log-log from (1 s, 1e-2) to (10 s, 1e-4): 1e-3 at sqrt(10) s
+    t, method = time_at_error(points, 1e-3)
+    assert method == "A" and t == pytest.approx(math.sqrt(10.0))
+    assert time_at_error(points, 1e-1) == (0.5, "A")
+    t, method = time_at_error(points, 1e-6)
+    assert math.isnan(t) and method == ""

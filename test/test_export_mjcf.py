@@ -74,6 +74,19 @@ def ring():
                        closure=closure, gravity=(0.5, -9.81, 2.0))
 
 
+def paper():
+    """The paper scene's model with the cut hinge's spring off (see ring())."""
+    from pathlib import Path
+
+    from panel_deploy.build import build_model
+    from panel_deploy.scene import load_scene
+
+    model = build_model(load_scene(Path(__file__).resolve().parent.parent
+                                   / "config" / "scenes" / "paper_4x4.yaml"))
+    k = np.array([0.0 if i in model.cut_hinges else h.k for i, h in enumerate(model.hinges)])
+    return model.with_stiffness(k, np.where(k > 0, [h.c for h in model.hinges], 0.0))
+
+
 def load(model):
     m = mujoco.MjModel.from_xml_string(export_mjcf(model))
     return m, mujoco.MjData(m)
@@ -154,7 +167,7 @@ def _open_tree(model):
                                                            k_N=0.0, c_N=0.0))
 
 
-@pytest.mark.parametrize("make", [branched_tree, collinear_loop, ring])
+@pytest.mark.parametrize("make", [branched_tree, collinear_loop, ring, paper])
 def test_open_tree_accelerations_match_the_kernel(make):
     """MuJoCo's qacc with constraints off equals our forward dynamics (springs,
     dampers, gravity, cut-hinge spring) at random states inside (0, pi)."""
@@ -225,3 +238,24 @@ def test_limit_row_stiffness_and_damping_as_mapped():
     M, _, _ = mass_matrix(model, d.qpos)
     paper = (-model.k_s * 1e-3 - model.c_s * 0.2) / M[0, 0]
     np.testing.assert_allclose(d.qacc[0], paper, rtol=2e-4)  # 1 - impedance leaks
+
+
+def test_paper_stowed_keyframe_closes_the_loop():
+    """At the stowed keyframe the cut hinge's ends coincide on both sides and
+    its angle, as MuJoCo measures it, is pi (folded)."""
+    from pathlib import Path
+
+    from panel_deploy.build import build_model
+    from panel_deploy.scene import load_scene
+
+    model = build_model(load_scene(Path(__file__).resolve().parent.parent
+                                   / "config" / "scenes" / "paper_4x4.yaml"))
+    cut = model.hinges[model.cut_hinges[0]]
+    assert cut.theta_stowed == pytest.approx(math.pi)
+    m, d = load(model)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    mujoco.mj_forward(m, d)
+    eq_rows = d.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+    assert eq_rows.sum() == 6
+    np.testing.assert_allclose(d.efc_pos[eq_rows], 0.0, atol=1e-12)
+    np.testing.assert_allclose(d.actuator_length[0] + math.pi / 2, math.pi, atol=1e-9)

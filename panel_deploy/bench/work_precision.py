@@ -33,13 +33,11 @@ from ..model import Model, State
 from ..scene import INTEGRATORS, SimulationSection
 from .mujoco_peer import run_mujoco
 
-#: The window over which a trajectory is compared, s. The collision module
-#: would give the first collision; the paper's prototype collided at 0.30 s.
-DEFAULT_WINDOW = 0.3
 SAMPLE_INTERVAL = 1e-3
 
 FULL_RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
 QUICK_RTOLS = (1e-3, 1e-6)
+#: Fixed window of ``--quick``, s (no collision probe).
 QUICK_WINDOW = 0.1
 FULL_STEPS = {"RK4": (1e-4, 5e-5, 2e-5, 1e-5, 5e-6, 2e-6, 1e-6),
               "implicitfast": (1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 5e-6, 2e-6, 1e-6)}
@@ -82,6 +80,28 @@ class WorkPrecision:
 def _settings(base: SimulationSection, window: float, **kw) -> SimulationSection:
     samples = int(round(window / SAMPLE_INTERVAL)) + 1
     return replace(base, t_end=window, samples=samples, **kw)
+
+
+def valid_window(model: Model, base: SimulationSection, collision=None, max_steps=2_000_000):
+    """The valid part of the deployment: 0 .. last sample before the first collision, s.
+
+    Probed with the scene's own integrator settings over its ``t_end``,
+    sampled every ``SAMPLE_INTERVAL``, and checked by
+    :func:`panel_deploy.collision.check_trajectory` (``collision``: the
+    scene's collision section). Returns ``(window, note)``; the window is
+    ``t_end`` if nothing collides.
+    """
+    from ..collision import check_trajectory
+    from ..dynamics.simulate import simulate
+
+    probe = simulate(model, _settings(base, base.t_end), max_steps=max_steps)
+    report = check_trajectory(model, probe, collision)
+    if report.first_collision is None:
+        return float(probe.t[-1]), f"no collision up to {probe.t[-1]:g} s ({base.method} probe)"
+    e = report.first_collision
+    window = float(probe.t[report.n_valid - 1])
+    return window, (f"first collision at {e.t:.4g} s ({e.names[0]} / {e.names[1]}, "
+                    f"{base.method} rtol {base.rtol:g} probe): window 0..{window:g} s")
 
 
 def _errors(theta, ref):
@@ -200,28 +220,33 @@ def time_at_error(points, target: float):
     return best
 
 
-def work_precision(model: Model, base: SimulationSection, *, window=DEFAULT_WINDOW,
+def work_precision(model: Model, base: SimulationSection, *, window=None, collision=None,
                    quick=False, repeats=3, methods=INTEGRATORS, mujoco=True,
                    max_steps=50_000, verbose=False) -> WorkPrecision:
     """Run the whole work-precision sweep on ``model``; see the module doc.
 
     ``max_steps`` is the step budget of every run of ours (not the reference):
     a method needing more is recorded as failed at that tolerance. ``quick``
-    sweeps fewer settings over ``QUICK_WINDOW`` (unless ``window`` is given
-    otherwise) with a looser reference, to finish in under two minutes.
+    sweeps fewer settings over ``QUICK_WINDOW`` with a looser reference, to
+    finish in under two minutes. Without ``window`` (s) the full run compares
+    over :func:`valid_window` (``collision``: the scene's collision section).
     """
-    if quick and window == DEFAULT_WINDOW:
-        window = QUICK_WINDOW
+    if window is not None:
+        window_note = f"window 0..{window:g} s (given)"
+    elif quick:
+        window, window_note = QUICK_WINDOW, f"window 0..{QUICK_WINDOW:g} s (quick: fixed, no collision probe)"
+    else:
+        window, window_note = valid_window(model, base, collision)
     rtols = QUICK_RTOLS if quick else FULL_RTOLS
     steps = QUICK_STEPS if quick else FULL_STEPS
     ref, spread, ref_wall = reference_solution(model, base, window, 1e-10 if quick else 1e-12)
     if verbose:
+        print(window_note, flush=True)
         print(f"reference: DOP853 rtol {1e-10 if quick else 1e-12:g}, {ref_wall:.2f} s, "
               f"spread {spread:.2e} rad", flush=True)
     points = sweep_ours(model, base, window, methods, rtols, repeats, ref.theta, max_steps, verbose)
     mj_spread = ours_vs_mujoco = math.nan
-    notes = [f"window 0..{window:g} s (fixed: first collision not used), samples every "
-             f"{SAMPLE_INTERVAL:g} s"]
+    notes = [f"{window_note}; samples every {SAMPLE_INTERVAL:g} s"]
     if mujoco:
         samples = ref.theta.shape[0]
         h_ref = min(min(hs) for hs in steps.values()) / 2
@@ -312,8 +337,8 @@ def work_precision_command(args, scene=None) -> int:
     from ..scene import load_scene
 
     scene = scene if scene is not None else load_scene(args.scene)
-    report = work_precision(build_model(scene), scene.simulation, quick=args.quick,
-                            repeats=args.repeats, verbose=True)
+    report = work_precision(build_model(scene), scene.simulation, collision=scene.collision,
+                            quick=args.quick, repeats=args.repeats, verbose=True)
     write_csv(report, args.out)
     plot(report, args.plot)
     print(summary(report))

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..model import Model, State
+from ..model import Model
 from ..scene import INTEGRATORS, SimulationSection
 from .mujoco_peer import run_mujoco
 
@@ -265,7 +265,7 @@ def work_precision(model: Model, base: SimulationSection, *, window=None, collis
 
 
 def write_csv(report: WorkPrecision, path) -> None:
-    """One row per point; the reference figures as comment-free extra columns."""
+    """One row per point, with the window and reference figures repeated on every row."""
     names = [f for f in Point.__dataclass_fields__]
     with open(path, "w", newline="") as f:
         w = csv.writer(f)

@@ -8,6 +8,7 @@ optimisation together. Misuse (bad scene, bad arguments) prints one line
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -168,6 +169,9 @@ def main(argv=None) -> int:
     except PanelDeployError as e:
         print(f"panel-deploy: error: {e}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into head & co.: not an error of ours
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except KeyboardInterrupt:
         print("panel-deploy: interrupted", file=sys.stderr)
         return 130

@@ -1,0 +1,74 @@
+"""The panel-deploy command line: every main job end to end, and its error contract."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from panel_deploy.cli import main
+from panel_deploy.trajectory_io import load_trajectory
+
+PAPER = str(Path(__file__).resolve().parent.parent / "config" / "scenes" / "paper_4x4.yaml")
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_fold_lists_circuits_as_json(capsys):
+    code, out, _ = run(capsys, "fold", "--rows", "4", "--cols", "4", "--json")
+    data = json.loads(out)
+    assert code == 0 and data["circuits"] == 6 and data["orbits"] == 2 and data["packable"] == 6
+
+
+def test_fold_scene_reports_the_paper_design(capsys, tmp_path):
+    code, out, _ = run(capsys, "fold", "--scene", PAPER, "--json", "--plot", str(tmp_path / "d.png"))
+    data = json.loads(out)
+    assert code == 0 and data["dof_cells"] == 10 and data["dof_bodies"] == 6
+    assert (tmp_path / "d.png").stat().st_size > 10_000
+
+
+def test_fold_needs_a_size_or_a_scene(capsys):
+    code, _, err = run(capsys, "fold")
+    assert code == 2 and err.startswith("panel-deploy: error: --rows/--cols")
+
+
+def test_simulate_saves_and_collide_reads_back(capsys, tmp_path):
+    out_file = tmp_path / "traj.npz"
+    code, out, _ = run(capsys, "simulate", "paper_4x4", "--t-end", "0.01", "--method", "compiled",
+                       "--json", "--out", str(out_file))
+    s = json.loads(out)
+    assert code == 0 and s["success"] and s["closure"] == "penalty"
+    assert s["energy_balance_error"] < 1e-6 and s["collision"]["collided"] is False
+    result, scene, k = load_trajectory(out_file)
+    assert result.theta.shape == (301, 11) and scene.name == "paper_4x4"
+    assert np.allclose(k, 0.1) and result.t[-1] == pytest.approx(0.01)
+    code, out, _ = run(capsys, "collide", str(out_file), "--json")
+    assert code == 0 and json.loads(out)["collided"] is False
+
+
+def test_simulate_text_summary_and_exact_closure(capsys):
+    code, out, _ = run(capsys, "simulate", PAPER, "--t-end", "0.005", "--closure", "exact",
+                       "--method", "compiled")
+    assert code == 0 and "closure exact" in out and "never left the stowed angle" in out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["simulate", PAPER, "--t-end", "-1"], "--t-end: expected a number > 0"),
+    (["simulate", PAPER, "--method", "Euler"], "--method: expected one of"),
+    (["collide", "missing.npz"], "missing.npz: trajectory file not found"),
+    (["export", "no_such_scene", "--mjcf", "x.xml"], "no_such_scene: scene file not found"),
+])
+def test_bad_arguments_are_one_line_errors(capsys, argv, message):
+    code, _, err = run(capsys, *argv)
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+
+
+def test_corrupt_trajectory_is_a_clear_error(capsys, tmp_path):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip")
+    code, _, err = run(capsys, "collide", str(bad))
+    assert code == 2 and "not a trajectory file" in err

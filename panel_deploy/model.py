@@ -253,40 +253,34 @@ class Model:
             if not (0 <= h.body_a < nb and 0 <= h.body_b < nb) or h.body_a == h.body_b:
                 raise ModelError(f"hinges[{i}] ({h.name}): bad bodies {h.body_a}, {h.body_b}")
         n_loops = len(hinges) - nb + 1
-        depth = _bfs_depth(nb, hinges, ground, exclude=())
-        if min(depth) < 0:
+        tree = _bfs_tree(nb, hinges, ground, exclude=())
+        if len(tree) != nb - 1:
             raise ModelError("hinges: the bodies are not all connected to the ground")
         if cut_hinges is None:
-            cut_hinges = _default_cuts(nb, hinges, ground, n_loops)
+            # Breadth-first search reaches each loop from both sides at once, so the
+            # hinge it leaves out is the one farthest from the ground, where the
+            # paper places its cut hinge (Fig. 3b).
+            in_tree = {i for i, _, _ in tree}
+            cut_hinges = [i for i in range(len(hinges)) if i not in in_tree]
         cut_hinges = tuple(sorted(int(i) for i in cut_hinges))
         if len(cut_hinges) != n_loops:
             raise ModelError(f"closure.cut_hinges: {n_loops} loop(s) need {n_loops} cut(s), "
                              f"got {len(cut_hinges)}")
-        if min(_bfs_depth(nb, hinges, ground, exclude=cut_hinges)) < 0:
+        tree = _bfs_tree(nb, hinges, ground, exclude=cut_hinges)
+        if len(tree) != nb - 1:
             raise ModelError("closure.cut_hinges: cutting these hinges disconnects the array")
 
         parent = [-1] * nb
         body_joint = [-1] * nb
         order = [ground]
         joints = []
-        seen = {ground}
-        queue = deque([ground])
-        while queue:
-            b = queue.popleft()
-            for i, h in enumerate(hinges):
-                if i in cut_hinges or b not in (h.body_a, h.body_b):
-                    continue
-                other = h.body_b if h.body_a == b else h.body_a
-                if other in seen:
-                    continue
-                if h.body_a != b:
-                    hinges[i] = h.reversed()
-                seen.add(other)
-                parent[other] = b
-                body_joint[other] = len(joints)
-                joints.append(i)
-                order.append(other)
-                queue.append(other)
+        for i, b, other in tree:
+            if hinges[i].body_a != b:
+                hinges[i] = hinges[i].reversed()
+            parent[other] = b
+            body_joint[other] = len(joints)
+            joints.append(i)
+            order.append(other)
         linked = {frozenset((h.body_a, h.body_b)) for h in hinges}
         pairs = tuple((i, j) for i in range(nb) for j in range(i + 1, nb)
                       if frozenset((i, j)) not in linked)
@@ -295,9 +289,14 @@ class Model:
                    closure, np.asarray(gravity, dtype=float), pairs, dict(metadata or {}))
 
 
-def _bfs_depth(nb, hinges, ground, exclude):
-    depth = [-1] * nb
-    depth[ground] = 0
+def _bfs_tree(nb, hinges, ground, exclude):
+    """Breadth-first spanning tree from the ground, skipping hinges in ``exclude``.
+
+    Returns ``[(hinge, parent body, child body), ...]`` in visiting order; it
+    has ``nb - 1`` entries exactly when every body is reached.
+    """
+    seen = {ground}
+    tree = []
     queue = deque([ground])
     while queue:
         b = queue.popleft()
@@ -305,33 +304,11 @@ def _bfs_depth(nb, hinges, ground, exclude):
             if i in exclude or b not in (h.body_a, h.body_b):
                 continue
             other = h.body_b if h.body_a == b else h.body_a
-            if depth[other] < 0:
-                depth[other] = depth[b] + 1
-                queue.append(other)
-    return depth
-
-
-def _default_cuts(nb, hinges, ground, n_loops):
-    """The hinges a breadth-first tree from the ground leaves out.
-
-    Breadth-first search reaches each loop from both sides at once, so the
-    hinge it leaves out is the one farthest from the ground, where the paper
-    places its cut hinge (Fig. 3b).
-    """
-    seen = {ground}
-    tree = set()
-    queue = deque([ground])
-    while queue:
-        b = queue.popleft()
-        for i, h in enumerate(hinges):
-            other = h.body_b if h.body_a == b else h.body_a if h.body_b == b else None
-            if other is not None and other not in seen:
+            if other not in seen:
                 seen.add(other)
-                tree.add(i)
+                tree.append((i, b, other))
                 queue.append(other)
-    cuts = [i for i in range(len(hinges)) if i not in tree]
-    assert len(cuts) == n_loops
-    return cuts
+    return tree
 
 
 @dataclass

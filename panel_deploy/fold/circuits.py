@@ -175,6 +175,20 @@ def _frontier_count(rows: int, cols: int) -> int:
     def put(s, k, v):
         return (s & ~(3 << (2 * k))) | (v << (2 * k))
 
+    def partner(s, k, step):
+        """Position of the bracket matching the one at ``k``, searching along ``step``."""
+        opening = get(s, k)
+        depth = 0
+        while True:
+            v = get(s, k)
+            if v == opening:
+                depth += 1
+            elif v:
+                depth -= 1
+                if depth == 0:
+                    return k
+            k += step
+
     total = 0
     for i in range(rows):
         for j in range(cols):
@@ -197,29 +211,9 @@ def _frontier_count(rows: int, cols: int) -> int:
                         outs.append(put(base, j + 1, x))
                 elif left == 1 and up == 1:
                     # Joining two opening ends: the partner of `up` opens now.
-                    depth, k = 0, j + 1
-                    while True:
-                        v = get(s, k)
-                        if v == 1:
-                            depth += 1
-                        elif v == 2:
-                            depth -= 1
-                            if depth == 0:
-                                break
-                        k += 1
-                    outs.append(put(base, k, 1))
+                    outs.append(put(base, partner(s, j + 1, 1), 1))
                 elif left == 2 and up == 2:
-                    depth, k = 0, j
-                    while True:
-                        v = get(s, k)
-                        if v == 2:
-                            depth += 1
-                        elif v == 1:
-                            depth -= 1
-                            if depth == 0:
-                                break
-                        k -= 1
-                    outs.append(put(base, k, 2))
+                    outs.append(put(base, partner(s, j, -1), 2))
                 elif left == 2 and up == 1:
                     outs.append(base)
                 else:  # left == 1, up == 2: the two ends of one segment meet.

@@ -30,15 +30,16 @@ def plate_reference(model, theta0, t):
     return solve_ivp(f, (0, t[-1]), [theta0, 0.0], t_eval=t, rtol=1e-12, atol=1e-12).y
 
 
-@pytest.mark.parametrize("method", ["RK45", "compiled", "Radau"])
+@pytest.mark.parametrize("method, scheme", [("RK45", "auto"), ("compiled", "dopri5"),
+                                            ("compiled", "ros34pw2"), ("Radau", "auto")])
 @pytest.mark.parametrize("gravity", [(0.0, 0.0, 0.0), (0.0, 0.0, 9.81)])
-def test_plate_matches_scalar_ode(method, gravity):
+def test_plate_matches_scalar_ode(method, scheme, gravity):
     # damping keeps the plate inside [0, pi] (no contact): zeta ~ 1 without gravity;
     # with gravity pulling it up the equilibrium is at ~0.1 rad
     model = plate_on_hinge(c=0.0043 if any(gravity) else 0.02, gravity=gravity)
     state = State(0.0, np.array([1.0]), np.zeros(1))
     r = simulate(model, SimulationSection(t_end=0.3, method=method, rtol=1e-9, atol=1e-11,
-                                          samples=61), state)
+                                          samples=61), state, compiled_scheme=scheme)
     assert r.success, r.message
     ref = plate_reference(model, 1.0, r.t)
     assert r.theta.min() > 0

@@ -10,7 +10,7 @@ import numpy as np
 from ..errors import ModelError
 from ..model import Model, State
 from . import kernels
-from .integrate import integrate
+from .integrate import SCHEMES, integrate
 from .pack import pack
 from .result import SimulationResult
 
@@ -25,7 +25,8 @@ def default_gap_limit(model: Model) -> float:
 
 
 def simulate(model: Model, settings, state: State | None = None, *,
-             max_steps: int = 2_000_000, gap_limit: float | None = None) -> SimulationResult:
+             max_steps: int = 2_000_000, gap_limit: float | None = None,
+             compiled_scheme: str = "auto") -> SimulationResult:
     """Simulate the deployment of ``model`` from ``state`` (default: stowed, at rest).
 
     Parameters
@@ -42,6 +43,13 @@ def simulate(model: Model, settings, state: State | None = None, *,
     gap_limit : float, optional
         Loop-closure gap (m) that ends the run as a blow-up; default
         :func:`default_gap_limit`. Ignored for a tree.
+    compiled_scheme : {"auto", "dopri5", "ros34pw2"}
+        The integrator behind ``method="compiled"``: explicit Dormand-Prince
+        5(4), the Rosenbrock-W method ROS34PW2 (linearly implicit, for the
+        stiff penalty and contact terms), or "auto", which takes ROS34PW2 when
+        the model is stiff at the start state
+        (:func:`~panel_deploy.dynamics.integrate.choose_scheme`). Ignored by
+        the scipy methods.
 
     Returns
     -------
@@ -54,13 +62,17 @@ def simulate(model: Model, settings, state: State | None = None, *,
         penalty), so that ``kinetic + spring + gravity + dissipated -
         constraint_work`` is constant. ``extra`` holds "cut_theta" (s, m),
         the cut-hinge angles, "switches" (located contact switches) and
-        "gap_limit".
+        "gap_limit" and "scheme" (the compiled scheme used, "" for scipy).
 
     Raises
     ------
     ModelError
         If the state does not fit the model or t_end is not after state.t.
+        Also if ``compiled_scheme`` is not one of the names above.
     """
+    if compiled_scheme not in ("auto", *SCHEMES):
+        raise ModelError(f"compiled_scheme: expected auto, {', '.join(SCHEMES)}; "
+                         f"got {compiled_scheme!r}")
     state = State.stowed(model) if state is None else state
     n = model.n_coords
     theta = np.asarray(state.theta, dtype=float)
@@ -79,7 +91,7 @@ def simulate(model: Model, settings, state: State | None = None, *,
     y0 = np.concatenate([theta, omega, [0.0, 0.0]])
 
     start = time.perf_counter()
-    run = integrate(P, y0, t_eval, settings, max_steps, limit)
+    run = integrate(P, y0, t_eval, settings, max_steps, limit, compiled_scheme)
     wall = time.perf_counter() - start
     return _result(P, t_eval[:len(run.y)], run, settings.method, wall, limit)
 
@@ -116,4 +128,4 @@ def _result(P, t, run, method, wall, gap_limit) -> SimulationResult:
         success=run.status == 0, status=run.status, message=run.message,
         nfev=run.nfev, njev=run.njev, nlu=run.nlu, nsteps=run.nsteps, wall_time=wall,
         method=method, extra={"cut_theta": cut_theta, "switches": run.nswitches,
-                              "gap_limit": gap_limit})
+                              "gap_limit": gap_limit, "scheme": run.scheme})

@@ -1,0 +1,130 @@
+"""The compiled Rosenbrock-W integrator (ROS34PW2) and its stiff Jacobian: a stiff
+overdamped hinge against its closed form, the W-method's order with any matrix,
+the stiff Jacobian against finite differences, the automatic choice, failures."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from panel_deploy.dynamics import kernels, rosenbrock, simulate
+from panel_deploy.dynamics.integrate import choose_scheme, stiffness
+from panel_deploy.dynamics.pack import pack
+from panel_deploy.errors import ModelError
+from panel_deploy.model import State
+from panel_deploy.scene import SimulationSection
+
+from test_dynamics_helpers import plate_on_hinge, random_branched, ring_2x2
+
+
+def hinge_inertia(model):
+    h, body = model.hinges[0], model.bodies[1]
+    r0 = body.flat_position - h.point
+    return h.axis @ (body.inertia + body.mass * (r0 @ r0 * np.eye(3) - np.outer(r0, r0))) @ h.axis
+
+
+def test_stiff_overdamped_hinge_matches_closed_form():
+    """I theta'' = -k theta - c theta' with roots -1e5 and -10 1/s (no gravity, no
+    contact: exactly linear). DOPRI5 would need >= 1e5 * T / 3.3 steps."""
+    plate = plate_on_hinge()
+    I_h = hinge_inertia(plate)
+    c = 1e5 * I_h
+    k = 10.0 * c
+    model = plate_on_hinge(k=k, c=c)
+    lam = np.roots([I_h, c, k])          # both real, negative
+    a = np.linalg.solve([[1, 1], lam], [1.0, 0.0])
+    T = 0.2
+    state = State(0.0, np.array([1.0]), np.zeros(1))
+    P = pack(model)
+    assert choose_scheme(P, np.array([1.0, 0.0, 0.0, 0.0])) == "ros34pw2"
+    r = simulate(model, SimulationSection(t_end=T, method="compiled", rtol=1e-6, atol=1e-9,
+                                          samples=41), state)
+    assert r.success, r.message
+    assert r.extra["scheme"] == "ros34pw2"
+    exact = np.exp(np.outer(r.t, lam)) @ a
+    assert np.abs(r.theta[:, 0] - exact).max() < 1e-5
+    explicit_steps = T * np.abs(lam).max() / 3.3
+    assert r.nsteps < explicit_steps / 20
+
+
+@pytest.mark.parametrize("jacobian", ["exact", "zero"])
+def test_w_method_local_error_is_fourth_order_with_any_matrix(jacobian):
+    """Halving h divides the one-step error of an order-3 method by ~16, whatever
+    matrix is in W (the W-method property); checked on the nonlinear plate."""
+    model = plate_on_hinge(gravity=(0.0, 0.0, 9.81))
+    P = pack(model)
+    y = np.array([1.0, 0.5, 0.0, 0.0])
+    f = kernels.rhs(P, y)
+    if jacobian == "exact":
+        J = kernels.rhs_jacobian(P, y, f)
+        A, B = J[1:2, :1].copy(), J[1:2, 1:2].copy()
+    else:
+        A, B = np.zeros((1, 1)), np.zeros((1, 1))
+    K = np.empty((7, 4))
+    settings = SimulationSection(t_end=1.0, method="DOP853", rtol=1e-13, atol=1e-14, samples=2)
+    errors = []
+    for h in (4e-3, 2e-3, 1e-3):
+        y1, err, ok = rosenbrock.step(P, y, f, h, A, B, K)
+        assert ok
+        ref = simulate(model, dataclasses.replace(settings, t_end=h),
+                       State(0.0, y[:1], y[1:2]))
+        errors.append(abs(y1[0] - ref.theta[-1, 0]) + h * abs(y1[1] - ref.omega[-1, 0]))
+    for e0, e1 in zip(errors, errors[1:]):
+        assert 10 < e0 / e1 < 24
+
+
+@pytest.mark.parametrize("closure", ["penalty", "exact"])
+def test_stiff_jacobian_holds_the_stiff_spectrum(closure):
+    """The most negative eigenvalues of [[0, I], [A, B]] from the stiff part agree with
+    the finite-difference Jacobian, with a hinge in contact (theta < 0)."""
+    model = ring_2x2(closure)
+    P = pack(model)
+    n = P.n
+    y = np.array([-0.01, 1.0, 1.0, 0.5, -0.3, 0.2, 0.0, 0.0])
+    assert kernels.contact_mode(y[0]) == 0
+    Jfd = kernels.rhs_jacobian(P, y, kernels.rhs(P, y))[:2 * n, :2 * n]
+    A, B, ok = kernels.stiff_jacobian(P, y)
+    assert ok
+    Jst = np.block([[np.zeros((n, n)), np.eye(n)], [A, B]])
+    ev_fd = np.sort(np.linalg.eigvals(Jfd).real)[:2]
+    ev_st = np.sort(np.linalg.eigvals(Jst).real)[:2]
+    assert ev_fd[0] < -1e3
+    np.testing.assert_allclose(ev_st, ev_fd, rtol=0.05)
+
+
+def test_auto_keeps_dopri5_for_a_mild_model():
+    model = plate_on_hinge(c=0.02)
+    P = pack(model)
+    y0 = np.array([1.0, 0.0, 0.0, 0.0])
+    assert 3.3 / stiffness(P, y0) > 2e-4
+    r = simulate(model, SimulationSection(t_end=0.05, method="compiled", samples=6),
+                 State(0.0, y0[:1], y0[1:2]))
+    assert r.success and r.extra["scheme"] == "dopri5"
+
+
+@pytest.mark.parametrize("closure", ["penalty", "exact"])
+def test_ros34pw2_energy_balance_with_damping(closure):
+    model = random_branched(0, closure=closure)
+    state = State(0.0, np.full(model.n_coords, 0.02), np.zeros(model.n_coords))
+    r = simulate(model, SimulationSection(t_end=0.05, method="compiled", rtol=1e-8, atol=1e-10,
+                                          samples=21), state, compiled_scheme="ros34pw2")
+    assert r.success, r.message
+    assert r.extra["scheme"] == "ros34pw2" and r.njev > 0 and r.nlu >= r.nsteps
+    E = r.energy
+    total = E["kinetic"] + E["spring"] + E["gravity"] + E["dissipated"] - E["constraint_work"]
+    assert E["dissipated"][-1] > 1e-2 * abs(total[0])
+    assert np.abs(total - total[0]).max() < 1e-5 * abs(total[0])
+
+
+def test_ros34pw2_failures_are_data():
+    model = random_branched(0)
+    state = State(0.0, np.full(model.n_coords, 0.3), np.zeros(model.n_coords))
+    settings = SimulationSection(t_end=0.1, method="compiled", samples=11)
+    r = simulate(model, settings, state, gap_limit=1e-9, compiled_scheme="ros34pw2")
+    assert not r.success and "gap" in r.message
+    closed = State(0.0, np.full(model.n_coords, 0.02), np.zeros(model.n_coords))
+    r = simulate(model, settings, closed, max_steps=3, compiled_scheme="ros34pw2")
+    assert not r.success and "budget" in r.message
+    assert np.all(np.isfinite(r.theta))
+    with pytest.raises(ModelError):
+        simulate(model, settings, state, compiled_scheme="rodas")

@@ -72,3 +72,20 @@ def test_corrupt_trajectory_is_a_clear_error(capsys, tmp_path):
     bad.write_bytes(b"not a zip")
     code, _, err = run(capsys, "collide", str(bad))
     assert code == 2 and "not a trajectory file" in err
+
+
+def test_simulate_takes_stiffness_from_a_result_file(capsys, tmp_path):
+    from panel_deploy.build import build_model
+    from panel_deploy.scene import load_scene
+    names = [h.name for h in build_model(load_scene(PAPER)).hinges]
+    k = {n: 0.05 + 0.01 * i for i, n in enumerate(names)}
+    stiff = tmp_path / "k.yaml"
+    stiff.write_text("hinges:\n" + "".join(f"  {n}: {{k: {v}}}\n" for n, v in k.items()))
+    out_file = tmp_path / "t.npz"
+    code, _, _ = run(capsys, "simulate", PAPER, "--t-end", "0.004", "--method", "compiled",
+                     "--stiffness", str(stiff), "--out", str(out_file))
+    assert code == 0
+    assert np.allclose(load_trajectory(out_file)[2], [k[n] for n in names])
+    stiff.write_text("hinges: {r1c1-r1c2: -1}\n")
+    code, _, err = run(capsys, "simulate", PAPER, "--t-end", "0.004", "--stiffness", str(stiff))
+    assert code == 2 and "stiffness file" in err and len(err.strip().splitlines()) == 1

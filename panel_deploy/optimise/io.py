@@ -24,6 +24,7 @@ Format (``format: panel_deploy.stiffness/1``)::
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -64,7 +65,9 @@ def dump_result(result, scene_name: str = "", extra: dict | None = None) -> str:
 def save_result(result, path, scene_name: str = "", extra: dict | None = None) -> Path:
     """Write ``result`` as YAML to ``path`` (see the module docstring); returns the path."""
     path = Path(path)
-    path.write_text(dump_result(result, scene_name, extra))
+    part = path.with_name(path.name + ".part")
+    part.write_text(dump_result(result, scene_name, extra))
+    os.replace(part, path)  # an interrupted run never leaves half a result file
     return path
 
 

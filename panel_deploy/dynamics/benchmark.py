@@ -9,7 +9,8 @@ the RHS and stiff-Jacobian cost (median of 5 runs of 2000 calls inside numba),
 then per method and rtol (atol = 1e-2 rtol): the median over R runs of the
 wall time per simulated second over the valid window (default 0.44 s, up to
 the paper scene's first collision), the max hinge-angle error against a
-compiled DOPRI5 reference at rtol 1e-11 (sampled every 5 ms), nfev, steps,
+compiled DOPRI5 reference at rtol 1e-11 (or the first of 1e-10, 1e-9 that
+succeeds; sampled every 5 ms), nfev, steps,
 and the time relative to compiled DOPRI5 at rtol 1e-6.
 """
 
@@ -31,6 +32,8 @@ from .simulate import simulate
 SCIPY = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA")
 COMPILED = ("compiled:dopri5", "compiled:ros34pw2")
 SWEEP = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
+#: Tried in turn: the exact closure's DOPRI5 step collapses at rtol 1e-11 (t ~ 0.1 s).
+REFERENCE_RTOL = (1e-11, 1e-10, 1e-9)
 
 
 @njit(cache=True)
@@ -77,11 +80,16 @@ def main(argv=None):
     settings = dataclasses.replace(scene.simulation, t_end=args.window, samples=samples)
     for closure in ("penalty", "exact"):
         model = dataclasses.replace(base, closure=dataclasses.replace(base.closure, method=closure))
-        ref = simulate(model, dataclasses.replace(settings, method="compiled", rtol=1e-11,
-                                                  atol=1e-13), compiled_scheme="dopri5")
-        y = np.concatenate([ref.theta[samples // 2], ref.omega[samples // 2], [0.0, 0.0]])
+        for ref_rtol in REFERENCE_RTOL:
+            ref = simulate(model, dataclasses.replace(settings, method="compiled", rtol=ref_rtol,
+                                                      atol=1e-2 * ref_rtol), compiled_scheme="dopri5")
+            if ref.success:
+                break
+        mid = len(ref.t) // 2
+        y = np.concatenate([ref.theta[mid], ref.omega[mid], [0.0, 0.0]])
         rhs_s, jac_s = kernel_cost(pack(model), y)
-        print(f"{closure}: reference {ref.message}, {ref.nsteps} steps; RHS {rhs_s * 1e6:.1f} us, "
+        print(f"{closure}: reference (DOPRI5 rtol {ref_rtol:.0e}) {ref.message}, {ref.nsteps} steps; "
+              f"RHS {rhs_s * 1e6:.1f} us, "
               f"stiff Jacobian {jac_s * 1e6:.1f} us (inside numba)", flush=True)
         baseline = None
         for method in methods:
@@ -92,8 +100,8 @@ def main(argv=None):
                 per_s = wall / r.t[-1]
                 if method == "compiled:dopri5" and rtol == 1e-6:
                     baseline = per_s
-                m = len(r.t)
-                err = float(np.abs(r.theta - ref.theta[:m]).max())
+                m = min(len(r.t), len(ref.t))
+                err = float(np.abs(r.theta[:m] - ref.theta[:m]).max())
                 ratio = f"{per_s / baseline:6.3f}" if baseline else "   n/a"
                 print(f"  {method:18s} rtol={rtol:.0e} ok={r.success!s:5s} "
                       f"wall/sim-s={per_s:8.3f} err={err:.1e} rad  nfev={r.nfev:8d} "

@@ -44,7 +44,7 @@ def test_simulate_saves_and_collide_reads_back(capsys, tmp_path):
     assert code == 0 and s["success"] and s["closure"] == "penalty"
     assert s["energy_balance_error"] < 1e-6 and s["collision"]["collided"] is False
     result, scene, k = load_trajectory(out_file)
-    assert result.theta.shape == (301, 11) and scene.name == "paper_4x4"
+    assert result.theta.shape == (401, 11) and scene.name == "paper_4x4"
     assert np.allclose(k, 0.1) and result.t[-1] == pytest.approx(0.01)
     code, out, _ = run(capsys, "collide", str(out_file), "--json")
     assert code == 0 and json.loads(out)["collided"] is False

@@ -1,6 +1,6 @@
 """Timings of the dynamics on the paper scene (not a test: prints medians and ratios).
 
-    python -m panel_deploy.dynamics.benchmark [--window S] [--repeats R] [method ...]
+    python bench/bench_dynamics.py [--window S] [--repeats R] [method ...]
 
 Methods: "compiled:dopri5", "compiled:ros34pw2", "compiled" (auto choice) and
 the scipy names; default: both compiled schemes over a tolerance sweep, the
@@ -19,15 +19,16 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import time
+from pathlib import Path
 
 import numpy as np
 from numba import njit
 
-from ..build import build_model
-from ..scene import load_scene
-from . import kernels
-from .pack import pack
-from .simulate import simulate
+from panel_deploy.build import build_model
+from panel_deploy.scene import load_scene
+from panel_deploy.dynamics import kernels
+from panel_deploy.dynamics.pack import pack
+from panel_deploy.dynamics.simulate import simulate
 
 SCIPY = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA")
 COMPILED = ("compiled:dopri5", "compiled:ros34pw2")
@@ -74,7 +75,7 @@ def main(argv=None):
     ap.add_argument("methods", nargs="*")
     args = ap.parse_args(argv)
     methods = args.methods or (COMPILED + SCIPY)
-    scene = load_scene("config/scenes/paper_4x4.yaml")
+    scene = load_scene(Path(__file__).resolve().parent.parent / "config" / "scenes" / "paper_4x4.yaml")
     base = build_model(scene)
     samples = int(round(args.window / 0.005)) + 1
     settings = dataclasses.replace(scene.simulation, t_end=args.window, samples=samples)

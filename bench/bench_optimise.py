@@ -32,7 +32,7 @@ def describe(label, ev):
     hit = (f"collision at {o.first_collision.get('t', float('nan')):.3f} s "
            f"{o.first_collision.get('pair')} v = {o.v:.3f} m/s") if o.collided else "no collision"
     print(f"{label}: f = {ev.f:+.5f}, {hit}, d = {o.d * 1e3:.2f} mm, "
-          f"largest |theta| at t_end = {o.flat_residual:.3f} rad "
+          f"closest approach to flat {o.flat_residual:.3f} rad "
           f"({'flat' if o.reached_flat else 'NOT flat'}){'' if o.simulated else ', simulation failed: ' + o.message}")
 
 

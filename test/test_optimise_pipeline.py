@@ -28,13 +28,11 @@ def short_scene(t_end, samples=26, **optimisation):
 
 
 def plate_angle(k, t_end, samples=26):
-    """Largest theta over the last 10 % of the samples of I theta'' = -k theta - BETA k theta',
-    theta(0) = pi, at rest (theta decreases monotonically there: the first of them)."""
+    """theta(t_end) of I theta'' = -k theta - BETA k theta', theta(0) = pi, at rest: theta
+    decreases monotonically there, so that is the run's closest approach to flat."""
     inertia = MASS * (A ** 2 + T ** 2) / 3  # box about an edge of its facet
-    t = np.linspace(0, t_end, samples)
-    first = t[-math.ceil(0.1 * samples)]
     sol = solve_ivp(lambda t, y: [y[1], (-k * y[0] - BETA * k * y[1]) / inertia],
-                    (0, first), [math.pi, 0.0], rtol=1e-11, atol=1e-12)
+                    (0, t_end), [math.pi, 0.0], rtol=1e-11, atol=1e-12)
     return sol.y[0, -1]
 
 
@@ -62,10 +60,11 @@ def test_optimiser_finds_the_oscillators_best_spring():
 
 
 def test_stack_that_does_not_reach_flat_gets_a_flat_collision_free_spring_set():
-    # Three stacked panels, no gravity: at uniform k = 0.1 they are still
-    # swinging at t_end; the flat term must drive the springs stiffer.
+    # Three stacked panels, no gravity: at uniform k = 0.1 they have not yet lain
+    # flat by t_end (closest approach ~0.1 rad; k = 0.2 gets there at ~0.3 s); the
+    # flat term must drive the springs stiffer.
     model = chain_model(3, beta=BETA)
-    s = short_scene(0.6, samples=41, max_evaluations=40, restarts=2)
+    s = short_scene(0.35, samples=41, max_evaluations=40, restarts=2)
     res = optimise(model, s, workers=1)
     assert not res.initial.outcome.reached_flat and not res.initial.outcome.collided
     assert res.success, res.message

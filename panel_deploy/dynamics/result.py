@@ -7,7 +7,7 @@ before the failure (``t`` may then be shorter than requested).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -72,3 +72,13 @@ class SimulationResult:
     wall_time: float = 0.0
     method: str = ""
     extra: dict = field(default_factory=dict)
+
+    def head(self, n: int) -> "SimulationResult":
+        """The first ``n`` samples (counters, status and message unchanged)."""
+        per_sample = {name: getattr(self, name)[:n] for name in (
+            "t", "theta", "omega", "rotation", "position", "linear_velocity",
+            "angular_velocity", "constraint_gap", "closure_sigma_min")}
+        extra = {k: (v[:n] if isinstance(v, np.ndarray) and len(v) == len(self.t) else v)
+                 for k, v in self.extra.items()}
+        return replace(self, **per_sample, energy={k: v[:n] for k, v in self.energy.items()},
+                       extra=extra)

@@ -15,14 +15,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..dynamics.report import FLAT_TOL, hinge_angles
 from ..errors import OptimisationError
 
-#: Largest |theta| (rad) at the end time for which the array counts as flat;
-#: the same 0.05 rad the dynamics' release report uses for "reached flat".
-FLAT_TOLERANCE = 0.05
-
-#: Fraction of the run, at its end, over which the flat residual is taken.
-FLAT_WINDOW = 0.1
+#: Largest |theta| (rad) of every hinge at which the array counts as flat; the
+#: dynamics' release report uses the same value for "reached flat".
+FLAT_TOLERANCE = FLAT_TOL
 
 #: Approach speed (m/s) charged to a run whose simulation failed: faster than
 #: any approach seen in the paper scene (tip speeds stay below ~3 m/s), so a
@@ -43,8 +41,9 @@ class Outcome:
     d : float
         Smallest proximal distance over the valid trajectory, m.
     flat_residual : float
-        Largest |theta| over the hinges and over the last
-        :data:`FLAT_WINDOW` of the samples, rad.
+        How close the valid part of the run came to flat: the smallest, over
+        its samples, of the largest |theta| of any hinge (cut hinges included),
+        rad. At most :data:`FLAT_TOLERANCE` when the array reached flat.
     first_collision : dict or None
         ``t`` (s), ``pair`` (two body names) and whatever else the
         collision check reports, as plain YAML-able values.
@@ -66,12 +65,12 @@ class Outcome:
 
     @property
     def reached_flat(self) -> bool:
-        """The run ended flat (every |theta| <= :data:`FLAT_TOLERANCE`)."""
+        """The array lay flat at some sample (every |theta| <= :data:`FLAT_TOLERANCE`)."""
         return self.simulated and self.flat_residual <= FLAT_TOLERANCE
 
     @property
     def feasible(self) -> bool:
-        """Collision-free and flat at the end: what the optimisation is for."""
+        """Collision-free until it first lies flat: what the optimisation is for."""
         return self.simulated and not self.collided and self.reached_flat
 
 
@@ -100,11 +99,11 @@ def objective(outcome: Outcome, p: float, q: float, flat_weight: float) -> float
     """Score of one run: the paper's Eq. (8) plus a flat term.
 
     ``f = p v - q d + flat_weight * max(0, r - FLAT_TOLERANCE)`` with ``r``
-    the largest hinge angle over the last tenth of the run (rad). Eq. (8) cannot see a
-    deployment that locks (a hinge that never leaves its stowed angle may
-    keep all panels far apart, which Eq. (8) rewards); the flat term charges
-    it in proportion to how far from flat it stays, and vanishes for every
-    run that ends flat, where f is exactly the paper's. With the scene
+    the outcome's flat residual: how close to flat the valid run came (rad).
+    Eq. (8) cannot see a deployment that locks (a hinge that never leaves its
+    stowed angle may keep all panels far apart, which Eq. (8) rewards); the
+    flat term charges it in proportion to how far from flat it stays, and
+    vanishes for every run that reaches flat, where f is exactly the paper's. With the scene
     defaults (p = 1 s/m, q = 10 /m, flat_weight = 1 /rad) a 0.1 m/s approach,
     a 10 mm clearance and a 0.1 rad leftover angle all score 0.1.
 
@@ -154,17 +153,22 @@ def run_deployment(model, settings) -> Outcome:
 
     start = time.perf_counter()
     result = simulate(model, settings.simulation)
-    report = check_trajectory(model, result, settings.collision)
-    theta = np.asarray(result.theta) if len(result.t) else model.theta_stowed[None, :]
-    # The last tenth of the run, not only the last sample: a lightly damped
-    # panel swinging through flat at t_end must not count as flat.
-    window = theta[-max(2, math.ceil(FLAT_WINDOW * len(theta))):]
+    if len(result.t):
+        spread = np.max(np.abs(hinge_angles(model, result)[2]), axis=1)
+    else:
+        spread = np.array([math.pi])
+    flat = np.flatnonzero(spread <= FLAT_TOLERANCE)
+    # The paper counts a deployment complete when the surface first becomes flat
+    # (section 4); the swinging about flat that follows is not checked.
+    deployed = result.head(flat[0] + 1) if len(flat) else result
+    report = check_trajectory(model, deployed, settings.collision)
+    valid = spread[:max(report.n_valid, 1)]
     return Outcome(
         collided=report.collided,
         v=float(report.v),
         # d is inf when no pair can collide; no clearance is then earned.
         d=float(report.d) if math.isfinite(report.d) else 0.0,
-        flat_residual=float(np.max(np.abs(window), initial=0.0)),
+        flat_residual=float(valid.min()),
         first_collision=plain(report.first_collision_dict()) if report.collided else None,
         simulated=bool(result.success),
         message=result.message,

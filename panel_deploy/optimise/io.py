@@ -13,7 +13,7 @@ Format (``format: panel_deploy.stiffness/1``)::
     d: 0.021                     # m, smallest proximal distance
     collision: null              # or {time, pair, ...} of the first collision
     reached_flat: true
-    flat_residual: 0.003         # rad, largest |theta| over the last 10 % of the run
+    flat_residual: 0.003         # rad, closest approach to flat (largest |theta|) before any collision
     initial: {f, v, d, collision, ...}   # the same for K_0
     success, status, message, nfev, nit, nstarts, method, wall_time
 

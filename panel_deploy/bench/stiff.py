@@ -227,13 +227,13 @@ def write_csv(outcomes, path) -> None:
 def array_models(scene, sizes) -> tuple[dict, list]:
     """Models of ``scene``'s array resized to each (rows, cols) of ``sizes``.
 
-    The fold is circuit 0 with the default ground and automatic merging; no
-    search for a circuit that packs (a size whose circuit 0 does not pack is
-    reported, not built). Returns ``({label: Model}, [notes on sizes that could
-    not be built])``.
+    The fold is the first circuit (in :func:`panel_deploy.fold.circuits` order)
+    that packs into two stacks, with its first cell as ground and automatic
+    merging. Returns ``({label: Model}, [notes, one per size])``.
     """
     from ..build import build_model
     from ..errors import PanelDeployError
+    from ..fold import designs
 
     models, notes = {}, []
     for rows, cols in sizes:
@@ -242,11 +242,16 @@ def array_models(scene, sizes) -> tuple[dict, list]:
                                 fold=dataclasses.replace(scene.fold, circuit=0, ground=None))
         start = time.perf_counter()
         try:
+            index = next((i for i, d in designs(rows, cols) if d.stowed is not None), None)
+            if index is None:
+                notes.append(f"{label}: no circuit packs into two stacks")
+                continue
+            resized = resized.replace(fold=dataclasses.replace(resized.fold, circuit=index))
             models[label] = build_model(resized)
         except PanelDeployError as e:
             notes.append(f"{label}: not built ({e})")
             continue
-        notes.append(f"{label}: built in {time.perf_counter() - start:.1f} s, "
+        notes.append(f"{label}: circuit {index}, built in {time.perf_counter() - start:.1f} s, "
                      f"{models[label].n_bodies} bodies, {models[label].n_coords} joints, "
                      f"{len(models[label].cut_hinges)} cut hinge(s)")
     return models, notes

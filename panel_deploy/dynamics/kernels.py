@@ -390,6 +390,29 @@ def _cholesky_solve(L, b):
 
 
 @njit(cache=True)
+def _constraint_factor(L, J, regularisation):
+    """Y = M^-1 J^T and the Cholesky factor of the regularised J M^-1 J^T.
+
+    ``L`` is the Cholesky factor of M; the Tikhonov term, relative to the
+    largest diagonal entry, keeps the factorisation defined through rank loss
+    of the closure Jacobian (the stowed and flat-aligned singular states).
+    Returns ``(Y, LA, ok)``.
+    """
+    n, mc = L.shape[0], J.shape[0]
+    Y = np.empty((n, mc))
+    for r in range(mc):
+        Y[:, r] = _cholesky_solve(L, J[r].copy())
+    A = _mm(J, Y)
+    scale = 0.0
+    for r in range(mc):
+        scale = max(scale, A[r, r])
+    for r in range(mc):
+        A[r, r] += regularisation * scale + 1e-300
+    LA, ok = _cholesky(A)
+    return Y, LA, ok
+
+
+@njit(cache=True)
 def _crba(P, R, p, S):
     """Spatial inertias (n, 6, 6) about the ground origin and the mass matrix (n, n)."""
     n = P.n
@@ -484,20 +507,10 @@ def rhs(P, y):
     if P.method == EXACT:
         R, p, w, vo, S = kin
         c, J, gamma = closure_jacobian(P, R, p, w, vo, S, acc)
-        mc = c.shape[0]
         cdot = _mv(J, omega)
         T = P.baumgarte
         target = -gamma - (2.0 / T) * cdot - c / (T * T)
-        Y = np.empty((n, mc))
-        for r in range(mc):
-            Y[:, r] = _cholesky_solve(L, J[r].copy())
-        A = _mm(J, Y)
-        scale = 0.0
-        for r in range(mc):
-            scale = max(scale, A[r, r])
-        for r in range(mc):
-            A[r, r] += P.regularisation * scale + 1e-300
-        LA, ok = _cholesky(A)
+        Y, LA, ok = _constraint_factor(L, J, P.regularisation)
         if not ok:
             dy[:] = np.nan
             return dy
@@ -617,17 +630,7 @@ def stiff_jacobian(P, y):
         A[:, col] = -_cholesky_solve(L, Kq[:, col].copy())
         B[:, col] = -_cholesky_solve(L, Cq[:, col].copy())
     if P.method == EXACT:
-        mc = J.shape[0]
-        Y = np.empty((n, mc))
-        for r in range(mc):
-            Y[:, r] = _cholesky_solve(L, J[r].copy())
-        JY = _mm(J, Y)
-        scale = 0.0
-        for r in range(mc):
-            scale = max(scale, JY[r, r])
-        for r in range(mc):
-            JY[r, r] += P.regularisation * scale + 1e-300
-        LA, ok = _cholesky(JY)
+        Y, LA, ok = _constraint_factor(L, J, P.regularisation)
         if not ok:
             return A, B, False
         T = P.baumgarte

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicHermiteSpline
 
-from panel_deploy.collision import CollisionMonitor, CollisionSettings, check_trajectory
+from panel_deploy.collision import CollisionMonitor, CollisionSettings, TrajectoryCheck, check_trajectory
 from panel_deploy.errors import TrajectoryError
 from panel_deploy.model import Body, Hinge, Model, box_inertia
 
@@ -253,3 +253,19 @@ def test_d_counts_a_pair_once_it_has_cleared_the_package():
         mon.update(t, [th, 0.0])
     assert not mon.resting.any()
     assert mon.min_distance == pytest.approx(mon.distances[0]) and mon.distances[0] > h
+
+
+def test_trajectory_check_fed_in_blocks_equals_the_one_shot_check():
+    traj = linear_fold(samples=151)
+    whole = check_trajectory(fold_model(), traj, CollisionSettings())
+    check = TrajectoryCheck(fold_model(), CollisionSettings(), capacity=10)
+    for a in range(0, 151, 13):
+        block = trajectory(traj.t[a:a + 13], traj.theta[a:a + 13], traj.omega[a:a + 13])
+        if check.feed(block):
+            break
+    piece = check.report()
+    assert piece.collided and whole.collided
+    assert piece.first_collision.t == whole.first_collision.t
+    assert (piece.n_valid, piece.v, piece.d) == (whole.n_valid, whole.v, whole.d)
+    np.testing.assert_array_equal(piece.distances, whole.distances)
+    np.testing.assert_array_equal(piece.t, whole.t)

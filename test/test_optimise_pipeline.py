@@ -86,3 +86,20 @@ def test_softer_lower_hinge_collides_in_the_real_pipeline():
     assert ev.outcome.collided and ev.outcome.v > 0
     assert set(ev.outcome.first_collision["pair"]) == {"P0", "P2"}
     assert ev.f == pytest.approx(objective(ev.outcome, 1.0, 10.0, 1.0)) and ev.f >= ev.outcome.v
+
+
+def test_run_stops_at_the_first_collision_and_at_first_flat():
+    # Collision: the run ends on the sample that revealed it (the rest is invalid).
+    s = short_scene(0.6, samples=41)
+    ev = evaluate(chain_model(3, beta=BETA), [0.01, 0.1], s)
+    dt = 0.6 / 40
+    assert ev.outcome.collided
+    assert ev.outcome.first_collision["t"] <= ev.outcome.t_stop < ev.outcome.first_collision["t"] + dt
+    # Flat: the run ends on the first flat sample of an uninterrupted simulation.
+    model = chain_model(3, beta=BETA)
+    s = short_scene(0.6, samples=61)
+    ev = evaluate(model, [0.2, 0.2], s)
+    sim = simulate(model.with_stiffness(ev.k, ev.c), s.simulation)
+    first_flat = sim.t[np.argmax(np.max(np.abs(sim.theta), axis=1) <= FLAT_TOLERANCE)]
+    assert ev.outcome.reached_flat and not ev.outcome.collided
+    assert ev.outcome.t_stop == pytest.approx(first_flat) and first_flat < 0.6

@@ -177,40 +177,89 @@ def check_trajectory(model: Model, result, settings=None, *, stop_at_first: bool
     -------
     CollisionReport
     """
-    start = time.perf_counter()
-    settings = _settings(settings)
-    monitor = CollisionMonitor(model, settings)
-    t = np.asarray(result.t, dtype=float)
-    P = len(monitor.pairs)
-    D = np.empty((len(t), P))
-    exact = np.empty((len(t), P), dtype=bool)
-    first_events: list = []
-    n_valid = len(t)
-    d, d_time, d_pair = math.inf, math.nan, None
-    checked = 0
-    for j in range(len(t)):
-        events = monitor.update(t[j], result.theta[j], result.omega[j])
-        D[j], exact[j] = monitor.distances, monitor.exact
-        checked = j + 1
-        if events and not first_events:
-            first_events = events
-            n_valid = j
-            if stop_at_first:
+    check = TrajectoryCheck(model, settings, capacity=len(result.t))
+    check.feed(result, stop_at_first=stop_at_first)
+    return check.report()
+
+
+class TrajectoryCheck:
+    """:func:`check_trajectory` taken in pieces: feed samples as they come, then report.
+
+    What :func:`~panel_deploy.optimise.evaluate.run_deployment` uses to stop
+    a simulation at its first collision instead of checking it afterwards.
+
+    Parameters
+    ----------
+    model : Model
+    settings : CollisionSettings, CollisionSection or Scene, optional
+    capacity : int
+        Samples to preallocate D_j for (it grows when exceeded).
+    """
+
+    def __init__(self, model: Model, settings=None, capacity: int = 64):
+        self._start = time.perf_counter()
+        self.settings = _settings(settings)
+        self.monitor = CollisionMonitor(model, self.settings)
+        P = len(self.monitor.pairs)
+        self._t = np.empty(capacity)
+        self._D = np.empty((capacity, P))
+        self._exact = np.empty((capacity, P), dtype=bool)
+        self.checked = 0
+        self.first_events: list = []
+        self.n_valid = None
+        self.d, self.d_time, self.d_pair = math.inf, math.nan, None
+
+    @property
+    def collided(self) -> bool:
+        return bool(self.first_events)
+
+    def feed(self, result, *, stop_at_first: bool = True) -> bool:
+        """Check the samples of ``result`` (a SimulationResult or a block of one).
+
+        Returns True once a collision has been found; with ``stop_at_first``
+        the samples after the one that revealed it are not checked.
+        """
+        for j in range(len(result.t)):
+            if self.collided and stop_at_first:
                 break
-        if not first_events and monitor.min_distance < d:
-            d, d_time, d_pair = monitor.min_distance, float(t[j]), monitor.pair_names(monitor.min_pair)
-    # Eq. (7) needs two earlier samples; before that the kinematic speed stands in.
-    V = np.zeros(P)
-    for e in first_events:
-        V[e.pair] = e.approach_speed if math.isfinite(e.approach_speed) else e.normal_speed
-    v = float(V.max()) if first_events else 0.0
-    counters = dict(monitor.counters, exact_fallbacks=monitor.exact_fallbacks)
-    return CollisionReport(
-        pairs=monitor.pairs, pair_names=[monitor.pair_names(k) for k in range(P)],
-        t=t[:checked], distances=D[:checked], exact=exact[:checked], n_valid=n_valid,
-        first_collision=first_events[0] if first_events else None, events=first_events,
-        V=V, v=v, d=d, d_time=d_time, d_pair=d_pair, counters=counters,
-        settings=settings, wall_time=time.perf_counter() - start, flat_contact=monitor.flat_contact)
+            self.update(result.t[j], result.theta[j], result.omega[j])
+        return self.collided
+
+    def update(self, t, theta, omega) -> list:
+        """Check one sample; the collision events it revealed."""
+        m = self.monitor
+        events = m.update(t, theta, omega)
+        j = self.checked
+        if j == len(self._t):
+            grow = max(64, j)
+            self._t = np.concatenate([self._t, np.empty(grow)])
+            self._D = np.concatenate([self._D, np.empty((grow, self._D.shape[1]))])
+            self._exact = np.concatenate([self._exact, np.empty((grow, self._D.shape[1]), bool)])
+        self._t[j], self._D[j], self._exact[j] = t, m.distances, m.exact
+        self.checked = j + 1
+        if events and not self.first_events:
+            self.first_events, self.n_valid = events, j
+        if not self.first_events and m.min_distance < self.d:
+            self.d, self.d_time, self.d_pair = m.min_distance, float(t), m.pair_names(m.min_pair)
+        return events
+
+    def report(self) -> CollisionReport:
+        """The :class:`CollisionReport` of everything fed so far."""
+        m, P, n = self.monitor, len(self.monitor.pairs), self.checked
+        # Eq. (7) needs two earlier samples; before that the kinematic speed stands in.
+        V = np.zeros(P)
+        for e in self.first_events:
+            V[e.pair] = e.approach_speed if math.isfinite(e.approach_speed) else e.normal_speed
+        return CollisionReport(
+            pairs=m.pairs, pair_names=[m.pair_names(k) for k in range(P)],
+            t=self._t[:n].copy(), distances=self._D[:n].copy(), exact=self._exact[:n].copy(),
+            n_valid=n if self.n_valid is None else self.n_valid,
+            first_collision=self.first_events[0] if self.first_events else None,
+            events=self.first_events, V=V, v=float(V.max()) if self.first_events else 0.0,
+            d=self.d, d_time=self.d_time, d_pair=self.d_pair,
+            counters=dict(m.counters, exact_fallbacks=m.exact_fallbacks),
+            settings=self.settings, wall_time=time.perf_counter() - self._start,
+            flat_contact=m.flat_contact)
 
 
 def collide_command(args) -> int:

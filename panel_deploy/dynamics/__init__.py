@@ -7,7 +7,7 @@ result: ``hinge_release_report``, ``summary``, ``energy_balance_error``.
 
 from .report import energy_balance_error, hinge_release_report, summary
 from .result import SimulationResult
-from .simulate import default_gap_limit, simulate
+from .simulate import default_gap_limit, simulate, simulate_segments
 
-__all__ = ["SimulationResult", "simulate", "default_gap_limit", "hinge_release_report",
+__all__ = ["SimulationResult", "simulate", "simulate_segments", "default_gap_limit", "hinge_release_report",
            "summary", "energy_balance_error"]

@@ -4,13 +4,14 @@ reports made from a result (hinge release times, one-dict summary)."""
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
 from ..errors import ModelError
 from ..model import Model, State
 from . import kernels
-from .integrate import SCHEMES, integrate
+from .integrate import SCHEMES, choose_scheme, integrate
 from .pack import pack
 from .result import SimulationResult
 
@@ -70,9 +71,50 @@ def simulate(model: Model, settings, state: State | None = None, *,
         If the state does not fit the model or t_end is not after state.t.
         Also if ``compiled_scheme`` is not one of the names above.
     """
+    return next(simulate_segments(model, settings, state, max_steps=max_steps,
+                                  gap_limit=gap_limit, compiled_scheme=compiled_scheme))
+
+
+def simulate_segments(model: Model, settings, state: State | None = None, *,
+                      segment_samples: int | None = None, max_steps: int = 2_000_000,
+                      gap_limit: float | None = None, compiled_scheme: str = "auto"):
+    """:func:`simulate`, handed out in consecutive blocks of samples.
+
+    A consumer that can stop early (at the first collision, or when the
+    array first lies flat) closes the generator and the rest of the run is
+    never integrated. Each block restarts the integrator from the last
+    sample of the previous one, so the samples agree with one uninterrupted
+    run to within the integration tolerance, not bit for bit.
+
+    Parameters
+    ----------
+    model, settings, state, max_steps, gap_limit, compiled_scheme
+        As for :func:`simulate`; ``max_steps`` is the budget of the whole run,
+        and "auto" picks the compiled scheme once, at the start state.
+    segment_samples : int, optional
+        Samples per block (the first block also holds the start sample);
+        default all of them in one block.
+
+    Yields
+    ------
+    SimulationResult
+        One per block, its ``t`` continuing the previous block's; counters
+        (``nfev``, ``nsteps``, ...) and ``wall_time`` are the block's own.
+        The last block is the one that reaches ``t_end`` or fails
+        (``success`` False, as in :func:`simulate`).
+
+    Raises
+    ------
+    ModelError
+        As :func:`simulate`; also if ``segment_samples`` is not a positive
+        integer.
+    """
     if compiled_scheme not in ("auto", *SCHEMES):
         raise ModelError(f"compiled_scheme: expected auto, {', '.join(SCHEMES)}; "
                          f"got {compiled_scheme!r}")
+    if segment_samples is not None and not (isinstance(segment_samples, int)
+                                            and segment_samples >= 1):
+        raise ModelError(f"segment_samples: expected an integer >= 1, got {segment_samples!r}")
     state = State.stowed(model) if state is None else state
     n = model.n_coords
     theta = np.asarray(state.theta, dtype=float)
@@ -88,12 +130,25 @@ def simulate(model: Model, settings, state: State | None = None, *,
     P = pack(model)
     limit = (default_gap_limit(model) if gap_limit is None else gap_limit) if model.cut_hinges else 0.0
     t_eval = np.linspace(state.t, settings.t_end, settings.samples)
-    y0 = np.concatenate([theta, omega, [0.0, 0.0]])
-
-    start = time.perf_counter()
-    run = integrate(P, y0, t_eval, settings, max_steps, limit, compiled_scheme)
-    wall = time.perf_counter() - start
-    return _result(P, t_eval[:len(run.y)], run, settings.method, wall, limit)
+    y = np.concatenate([theta, omega, [0.0, 0.0]])
+    if compiled_scheme == "auto" and settings.method == "compiled":
+        compiled_scheme = choose_scheme(P, y)
+    last = len(t_eval) - 1
+    block = last if segment_samples is None else segment_samples
+    first, steps_left = 0, max_steps
+    while True:
+        stop = min(first + block, last)
+        start = time.perf_counter()
+        run = integrate(P, y, t_eval[first:stop + 1], settings, steps_left, limit, compiled_scheme)
+        wall = time.perf_counter() - start
+        # Later blocks start on the previous block's last sample: not repeated.
+        skip = 0 if first == 0 else 1
+        yield _result(P, t_eval[first + skip:first + len(run.y)], replace(run, y=run.y[skip:]),
+                      settings.method, wall, limit)
+        steps_left -= run.nsteps
+        if run.status != 0 or stop == last:
+            return
+        y, first = run.y[-1], stop
 
 
 def _result(P, t, run, method, wall, gap_limit) -> SimulationResult:

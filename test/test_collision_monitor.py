@@ -269,3 +269,19 @@ def test_trajectory_check_fed_in_blocks_equals_the_one_shot_check():
     assert (piece.n_valid, piece.v, piece.d) == (whole.n_valid, whole.v, whole.d)
     np.testing.assert_array_equal(piece.distances, whole.distances)
     np.testing.assert_array_equal(piece.t, whole.t)
+
+
+def test_monitor_poses_are_the_numpy_forward_kinematics():
+    # The monitor takes poses from the compiled dynamics kernel; they must be the
+    # reference forward kinematics, in model body order, on a branched closed loop.
+    from panel_deploy.kinematics import forward_kinematics
+    from test_dynamics_helpers import random_branched
+    m = random_branched(3)
+    mon = CollisionMonitor(m)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        theta = rng.uniform(0.0, math.pi, m.n_coords)
+        R, p = mon._kinematics(theta)
+        R_ref, p_ref = forward_kinematics(m, theta)
+        np.testing.assert_allclose(R, R_ref, atol=1e-14)
+        np.testing.assert_allclose(p, p_ref, atol=1e-14)

@@ -89,3 +89,34 @@ def test_simulate_takes_stiffness_from_a_result_file(capsys, tmp_path):
     stiff.write_text("hinges: {r1c1-r1c2: -1}\n")
     code, _, err = run(capsys, "simulate", PAPER, "--t-end", "0.004", "--stiffness", str(stiff))
     assert code == 2 and "stiffness file" in err and len(err.strip().splitlines()) == 1
+
+
+def test_sigterm_during_optimise_saves_the_best_so_far(tmp_path):
+    # The optimiser is stopped once its first batch has been reported; the result
+    # file must hold that batch's best K, readable back as stiffness.
+    import signal
+    import subprocess
+    import sys
+
+    import yaml
+
+    from panel_deploy.build import build_model
+    from panel_deploy.optimise import load_stiffness
+    from panel_deploy.scene import load_scene
+
+    out = tmp_path / "best.yaml"
+    proc = subprocess.Popen([sys.executable, "-m", "panel_deploy.cli", "optimise", PAPER,
+                             "--workers", "1", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        first = proc.stderr.readline()
+        assert "nfev" in first, first
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    data = yaml.safe_load(out.read_text())
+    assert data["status"] == 3 and data["message"].startswith("interrupted after")
+    k = load_stiffness(out, build_model(load_scene(PAPER)))
+    assert k.shape == (12,) and np.all(k > 0)

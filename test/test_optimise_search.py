@@ -187,3 +187,24 @@ def test_unreachable_scheduler_is_a_clear_error():
     # Port 9 (discard) on loopback: nothing listens, the connect times out quickly.
     with pytest.raises(OptimisationError, match="^dask_address: cannot reach"):
         optimise(chain_model(), scene(), dask_address="tcp://127.0.0.1:9", evaluation=bowl_outcome)
+
+
+_CALLS = []
+
+
+def interrupted_outcome(model, settings):
+    """bowl_outcome, until the 12th run, where the user presses Ctrl-C."""
+    _CALLS.append(1)
+    if len(_CALLS) == 12:
+        raise KeyboardInterrupt
+    return bowl_outcome(model, settings)
+
+
+def test_ctrl_c_returns_the_best_so_far_as_a_result(tmp_path):
+    _CALLS.clear()
+    res = optimise(chain_model(), scene(), workers=1, evaluation=interrupted_outcome)
+    # The batch the interrupt hit is lost; every batch before it is kept.
+    assert res.status == 3 and f"interrupted after {res.nfev} evaluations" in res.message
+    assert res.success == res.outcome.feasible
+    assert 0 < res.nfev == len(res.history) < 12
+    assert res.f == min(e.f for e in res.history)

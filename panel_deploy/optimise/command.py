@@ -41,6 +41,14 @@ def optimise_command(args, scene) -> int:
                       method=arg("method"),
                       max_evaluations=arg("max_evaluations"))
     extra = {}
+    if result.status == 3:
+        # Ctrl-C again would lose the file: save what there is, skip the checks.
+        if arg("out"):
+            save_result(result, arg("out"), scene.name, extra)
+            print(f"{result.message} -> {arg('out')}", file=sys.stderr)
+        else:
+            print(dump_result(result, scene.name, extra), end="")
+        return 130
     check = verify(model, result.k, scene)
     extra["verification"] = {"tighten": 10.0, "refine": 2, **check.summary()}
     springs = arg("springs")

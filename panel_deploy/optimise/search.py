@@ -71,7 +71,8 @@ class OptimisationResult:
         The best K is collision-free and reaches flat.
     status : int
         0 feasible and the solver converged; 1 feasible, stopped by the
-        evaluation budget or the iteration limit; 2 no feasible K found.
+        evaluation budget or the iteration limit; 2 no feasible K found;
+        3 interrupted (Ctrl-C): the best K of the evaluations done so far.
     message : str
     nfev : int
         Simulations run (cached repeats not counted).
@@ -204,6 +205,7 @@ class _Search:
         self.nit = 0
         self.nstarts = 0
         self.budget_spent = False
+        self.interrupted = False
 
     def _report(self):
         if self.progress is not None:
@@ -284,6 +286,12 @@ class _Search:
         except BudgetExhausted:
             self.budget_spent = True
             converged = False
+        except KeyboardInterrupt:
+            # What was evaluated is still a result: the caller can save it.
+            if self.evaluator.best is None:
+                raise
+            self.interrupted = True
+            converged = False
         return converged
 
     def result(self, method, converged, wall_time) -> OptimisationResult:
@@ -291,7 +299,11 @@ class _Search:
         feasible = best is not None and best.outcome.feasible
         if best is None:
             raise OptimisationError("max_evaluations: the budget does not allow a single evaluation")
-        if not feasible:
+        if self.interrupted:
+            status = 3
+            message = (f"interrupted after {self.evaluator.nfev} evaluations; the best K so far "
+                       f"is {'collision-free and flat' if feasible else 'not feasible'}")
+        elif not feasible:
             status = 2
             what = "collides" if best.outcome.collided else (
                 "does not reach flat" if best.outcome.simulated else "fails to simulate")

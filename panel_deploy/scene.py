@@ -265,6 +265,9 @@ class OptimisationSection:
     max_evaluations: int = spec(200, integer(1), "", "simulation budget")
     workers: int = spec(0, integer(0), "", "parallel workers (0: all cores)")
     seed: int = spec(0, integer(0), "", "random seed for restarts and global search")
+    rtol: float = spec(None, optional(number(0, low_open=True)), "",
+                       "simulation.rtol during the search (atol scaled alike; default simulation.rtol); "
+                       "the optimum is re-checked at simulation.rtol / 10")
 
 
 @dataclass(frozen=True)

@@ -208,3 +208,15 @@ def test_ctrl_c_returns_the_best_so_far_as_a_result(tmp_path):
     assert res.success == res.outcome.feasible
     assert 0 < res.nfev == len(res.history) < 12
     assert res.f == min(e.f for e in res.history)
+
+
+def test_search_tolerance_scales_rtol_and_atol_together():
+    from panel_deploy.optimise.search import search_settings
+    s = scene()
+    assert search_settings(s) is s                      # default: the scene's own
+    loose = scene(rtol=1e-3)
+    sim = search_settings(loose).simulation
+    assert sim.rtol == 1e-3
+    assert sim.atol / sim.rtol == pytest.approx(loose.simulation.atol / loose.simulation.rtol)
+    with pytest.raises(Exception, match=r"optimisation\.rtol"):
+        scene(rtol=-1.0)

@@ -31,7 +31,7 @@ def resolve_scene(name: str) -> Path:
 
 def _load(args):
     from .scene import load_scene
-    return load_scene(resolve_scene(args.scene))
+    return load_scene(resolve_scene(args.scene), getattr(args, "set", None) or ())
 
 
 def cmd_schema(args):
@@ -100,6 +100,12 @@ def _stiffness_list(text):
     return values
 
 
+def _add_set(parser):
+    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
+                        help="override a scene key, VALUE read as YAML "
+                             "(e.g. --set gravity=[0,0,0] --set simulation.t_end=3); repeatable")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="panel-deploy", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -115,6 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--limit", type=int, default=50, help="list at most this many circuits")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.add_argument("--plot", metavar="FILE.png", help="draw the design and its stacks")
+    _add_set(s)
     s.set_defaults(func=cmd_fold)
 
     s = sub.add_parser("simulate", help="simulate one deployment and check it for collisions")
@@ -125,6 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--method", help="override simulation.method")
     s.add_argument("--closure", choices=("penalty", "exact"), help="override closure.method")
     s.add_argument("--t-end", type=float, help="override simulation.t_end (s)")
+    _add_set(s)
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("collide", help="collision check of a saved trajectory")
@@ -145,11 +153,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--perturb-tol", type=float, default=0.05, help="relative spread of k and c")
     s.add_argument("--quiet", action="store_true", help="no progress lines")
     s.add_argument("--json", action="store_true", help="print the result as JSON")
+    _add_set(s)
     s.set_defaults(func=cmd_optimise)
 
     s = sub.add_parser("export", help="export the model (MuJoCo MJCF)")
     s.add_argument("scene")
     s.add_argument("--mjcf", metavar="FILE.xml", required=True)
+    _add_set(s)
     s.set_defaults(func=cmd_export)
 
     s = sub.add_parser("bench", help="benchmarks")
@@ -160,6 +170,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--plot", default="work_precision.png", help="log-log plot")
     b.add_argument("--repeats", type=int, default=3)
     b.add_argument("--quick", action="store_true", help="fewer tolerances and steps (< 2 min)")
+    _add_set(b)
     b.set_defaults(func=cmd_bench)
     return p
 

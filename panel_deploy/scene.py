@@ -9,6 +9,7 @@ naming the key path (``simulation.rtol: expected a number > 0, got -1``).
 
 from __future__ import annotations
 
+import copy
 import math
 import re
 from dataclasses import dataclass, field, fields, replace
@@ -363,14 +364,23 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
                  description=data.get("description", ""), source=source, data=data)
 
 
-def load_scene(path) -> Scene:
+def load_scene(path, overrides=()) -> Scene:
     """Read and validate a scene YAML file.
+
+    Parameters
+    ----------
+    path : str or Path
+    overrides : sequence of str
+        ``"key.path=value"`` items applied to the file's mapping before
+        validation, the value read as YAML (``gravity=[0, 0, 0]``,
+        ``simulation.t_end=3``); see :func:`apply_overrides`.
 
     Raises
     ------
     SceneError
         If the file is missing or unreadable, is not valid YAML, or fails
-        validation; the message names the file and the key path.
+        validation (overrides included); the message names the file and the
+        key path.
     """
     path = Path(path)
     try:
@@ -387,9 +397,44 @@ def load_scene(path) -> Scene:
         problem = getattr(e, "problem", None) or str(e).splitlines()[0]
         raise SceneError(str(path), f"malformed YAML{where}: {problem}") from None
     try:
-        return scene_from_dict(data, source=str(path))
+        return scene_from_dict(apply_overrides(data, overrides), source=str(path))
     except SceneError as e:
         raise SceneError(f"{path.name}: {e.path}" if e.path else path.name, e.reason) from None
+
+
+def apply_overrides(data, overrides) -> dict:
+    """A copy of the scene mapping ``data`` with ``"key.path=value"`` items set.
+
+    The value is parsed as YAML, so numbers, lists and mappings keep their
+    type; sections that are missing are created. Validation is left to
+    :func:`scene_from_dict`, which names the key of a bad value.
+
+    Raises
+    ------
+    SceneError
+        If an item has no ``=`` or an empty key, its value is not valid YAML,
+        or its key path runs through a value that is not a mapping.
+    """
+    data = copy.deepcopy(data) if data is not None else {}
+    for item in overrides:
+        key, sep, text = str(item).partition("=")
+        key = key.strip()
+        if not sep or not key or any(not part for part in key.split(".")):
+            raise SceneError(str(item), "expected an override KEY.PATH=VALUE, "
+                                        "e.g. simulation.t_end=3")
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError as e:
+            raise SceneError(key, f"override value {text!r} is not valid YAML "
+                                  f"({str(e).splitlines()[0]})") from None
+        *parents, last = key.split(".")
+        node = data
+        for part in parents:
+            node = node.setdefault(part, {}) if isinstance(node, dict) else None
+        if not isinstance(node, dict):
+            raise SceneError(".".join(parents) or key, f"cannot set {key}: not a mapping")
+        node[last] = value
+    return data
 
 
 def describe_schema() -> str:

@@ -1,6 +1,8 @@
 """Scene loading: defaults, the shipped scenes, and every class of bad input."""
 
 import copy
+import json
+import re
 from pathlib import Path
 
 import pytest
@@ -123,3 +125,34 @@ def test_schema_lists_every_section():
     text = describe_schema()
     for key in ("array.rows", "closure.k_M", "simulation.rtol", "optimisation.bounds", "gravity"):
         assert key in text
+
+
+def test_overrides_set_keys_before_validation():
+    s = load_scene(PAPER, ["gravity=[0, 0, 0]", "simulation.t_end=0.5",
+                           "optimisation.bounds=[0.01, 0.1]"])
+    assert s.gravity == (0.0, 0.0, 0.0) and s.simulation.t_end == 0.5
+    assert s.optimisation.bounds == (0.01, 0.1)
+    assert s.data["simulation"]["t_end"] == 0.5        # what a saved trajectory rebuilds from
+    assert load_scene(PAPER).simulation.t_end == 2.0   # the file itself is untouched
+
+
+@pytest.mark.parametrize("item, expected", [
+    ("simulation.t_end=-1", "simulation.t_end: expected a number > 0"),
+    ("simulation.bogus=1", "simulation.bogus: unknown key"),
+    ("gravity.x=1", "gravity: cannot set gravity.x: not a mapping"),
+    ("t_end", "expected an override KEY.PATH=VALUE"),
+    ("simulation..t_end=1", "expected an override KEY.PATH=VALUE"),
+    ("simulation.t_end=[1", "simulation.t_end: override value '[1' is not valid YAML"),
+])
+def test_bad_overrides_name_the_key(item, expected):
+    with pytest.raises(SceneError, match=re.escape(expected)):
+        load_scene(PAPER, [item])
+
+
+def test_cli_set_reaches_the_scene(capsys):
+    code = main(["simulate", str(PAPER), "--json", "--set", "simulation.t_end=0.05",
+                 "--set", "simulation.samples=11"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["t_end"] == 0.05
+    assert main(["simulate", str(PAPER), "--set", "simulation.samples=1.5"]) == 2
+    assert "simulation.samples: expected an integer" in capsys.readouterr().err

@@ -269,6 +269,9 @@ class OptimisationSection:
     rtol: float = spec(None, optional(number(0, low_open=True)), "",
                        "simulation.rtol during the search (atol scaled alike; default simulation.rtol); "
                        "the optimum is re-checked at simulation.rtol / 10")
+    refine: bool = spec(None, optional(boolean), "",
+                        "collision.refine during the search (default collision.refine); "
+                        "the optimum is re-checked with collision.refine")
 
 
 @dataclass(frozen=True)

@@ -210,10 +210,11 @@ def test_ctrl_c_returns_the_best_so_far_as_a_result(tmp_path):
     assert res.f == min(e.f for e in res.history)
 
 
-def test_search_tolerance_scales_rtol_and_atol_together():
+def test_search_settings_loosen_rtol_atol_and_refinement():
     from panel_deploy.optimise.search import search_settings
     s = scene()
-    assert search_settings(s) is s                      # default: the scene's own
+    assert search_settings(s) == s                      # default: the scene's own
+    assert search_settings(scene(refine=False)).collision.refine is False
     loose = scene(rtol=1e-3)
     sim = search_settings(loose).simulation
     assert sim.rtol == 1e-3

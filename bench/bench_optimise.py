@@ -7,7 +7,8 @@ evaluation (median of the single-run wall times, and wall time / nfev,
 which includes parallel speed-up and solver overhead).
 
     python bench/bench_optimise.py [SCENE] [--workers N] [--method local|global]
-                                   [--max-evaluations N] [--out RESULT.yaml]
+                                   [--max-evaluations N] [--seed N] [--out RESULT.yaml]
+                                   [--set KEY=VALUE ...]
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from panel_deploy.build import build_model  # noqa: E402
+from panel_deploy.cli import resolve_scene  # noqa: E402
 from panel_deploy.optimise import optimise, print_progress, save_result, verify  # noqa: E402
 from panel_deploy.scene import load_scene  # noqa: E402
 
@@ -42,17 +44,20 @@ def main(argv=None):
     p.add_argument("--workers", type=int, default=0)
     p.add_argument("--method", choices=("local", "global"))
     p.add_argument("--max-evaluations", type=int)
+    p.add_argument("--seed", type=int)
     p.add_argument("--out", help="write the result YAML here")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="scene override, as panel-deploy --set")
     args = p.parse_args(argv)
 
-    scene = load_scene(args.scene)
+    scene = load_scene(resolve_scene(args.scene), args.set)
     model = build_model(scene)
     start = time.perf_counter()
     res = optimise(model, scene, workers=args.workers, method=args.method,
-                   max_evaluations=args.max_evaluations, progress=print_progress)
+                   max_evaluations=args.max_evaluations, seed=args.seed, progress=print_progress)
     wall = time.perf_counter() - start
     print()
-    print(f"scene {scene.name}: {len(model.hinges)} hinges in {res.problem.n} groups, "
+    print(f"scene {scene.name}{' with ' + ', '.join(args.set) if args.set else ''}: {len(model.hinges)} hinges in {res.problem.n} groups, "
           f"bounds {res.problem.bounds} N m/rad, method {res.method}")
     describe("K_0    ", res.initial)
     describe("optimum", res.best)
@@ -67,7 +72,8 @@ def main(argv=None):
     print(f"wall time {wall:.1f} s; per evaluation: median single run {np.median(times):.2f} s, "
           f"wall / nfev {wall / max(res.nfev, 1):.2f} s")
     check = verify(model, res.k, scene)
-    describe("re-check (rtol, atol / 10, samples x 2)", check)
+    describe(f"re-check (rtol {scene.simulation.rtol / 10:g}, samples x 2, "
+             f"collision.refine {scene.collision.refine})", check)
     if args.out:
         save_result(res, args.out, scene.name)
         print(f"result -> {args.out}")

@@ -218,6 +218,7 @@ def compiled_loop(P, y0, t_eval, rtol, atol, max_step, locate, max_steps, gap_li
     nsteps = 0
     nswitches = 0
     landed = False  # the last step was shortened onto a switch: do not locate in the next
+    rejected = False  # the last attempt was rejected by the error test
     j = 1
     while j < s:
         if not np.all(np.isfinite(f)):
@@ -241,6 +242,7 @@ def compiled_loop(P, y0, t_eval, rtol, atol, max_step, locate, max_steps, gap_li
             h = 0.2 * step
         elif en > 1.0:
             h = step * max(0.2, 0.9 * en ** expo)
+            rejected = True
         else:
             frac = first_switch(n, y, y1, step, atol) if locate and not landed else 2.0
             if EDGE < frac < 1.0 - EDGE:
@@ -271,7 +273,11 @@ def compiled_loop(P, y0, t_eval, rtol, atol, max_step, locate, max_steps, gap_li
                 return Y, -1, 3, nfev, njev, nlu, nsteps, nswitches
             if nsteps >= max_steps:
                 return Y, -1, 4, nfev, njev, nlu, nsteps, nswitches
-            h = step * min(10.0, 0.9 * en ** expo) if en > 0 else 10.0 * step
+            grow = min(10.0, 0.9 * en ** expo) if en > 0 else 10.0
+            # After a rejection do not grow again at once (Hairer & Wanner II.4):
+            # the error estimate just said the step was too long.
+            h = step * (min(1.0, grow) if rejected else grow)
+            rejected = False
             continue
         if h < 10.0 * np.finfo(np.float64).eps * max(1.0, abs(t)):
             return Y, -1, 1, nfev, njev, nlu, nsteps, nswitches

@@ -103,3 +103,20 @@ def test_run_stops_at_the_first_collision_and_at_first_flat():
     first_flat = sim.t[np.argmax(np.max(np.abs(sim.theta), axis=1) <= FLAT_TOLERANCE)]
     assert ev.outcome.reached_flat and not ev.outcome.collided
     assert ev.outcome.t_stop == pytest.approx(first_flat) and first_flat < 0.6
+
+
+def test_a_colliding_run_earns_no_clearance_on_the_paper_scene():
+    # Eq. (8)'s d is the minimum over all D_j, and the colliding pair's D_j is 0:
+    # the 45 mm of clearance before K_0's collision must not be credited.
+    from pathlib import Path
+    from panel_deploy.build import build_model
+    from panel_deploy.optimise.search import search_settings
+    from panel_deploy.scene import load_scene
+    s = search_settings(load_scene(Path(__file__).resolve().parent.parent / "config" / "scenes"
+                                   / "paper_4x4.yaml", ["simulation.t_end=0.5"]))
+    model = build_model(s)
+    ev = evaluate(model, model.stiffness, s)
+    report = check_trajectory(model, simulate(model, s.simulation), s.collision)
+    assert ev.outcome.collided and report.collided
+    assert report.d > 0.04 and ev.outcome.d == 0.0
+    assert ev.f == pytest.approx(ev.outcome.v + max(0.0, ev.outcome.flat_residual - FLAT_TOLERANCE))

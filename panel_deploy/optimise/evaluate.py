@@ -39,7 +39,10 @@ class Outcome:
     v : float
         Approach speed at the first collision, Eq. (7), m/s (0 if none).
     d : float
-        Smallest proximal distance over the valid trajectory, m.
+        Smallest proximal distance, m, as Eq. (8) takes it: the minimum
+        over all D_j, so 0 for a run that collides (the colliding pair's
+        entry of D is 0 there) and the smallest distance over the run
+        otherwise.
     flat_residual : float
         How close the valid part of the run came to flat: the smallest, over
         its samples, of the largest |theta| of any hinge (cut hinges included),
@@ -185,8 +188,10 @@ def run_deployment(model, settings) -> Outcome:
     return Outcome(
         collided=report.collided,
         v=float(report.v),
-        # d is inf when no pair can collide; no clearance is then earned.
-        d=float(report.d) if math.isfinite(report.d) else 0.0,
+        # A colliding run's D_j has a zero entry, so Eq. (8) earns it no
+        # clearance: a slow collision must not outscore a collision-free run.
+        # d is inf when no pair can collide; no clearance is earned then either.
+        d=float(report.d) if math.isfinite(report.d) and not report.collided else 0.0,
         flat_residual=closest if math.isfinite(closest) else math.pi,
         first_collision=plain(report.first_collision_dict()) if report.collided else None,
         simulated=bool(result.success),

@@ -1,8 +1,9 @@
 """Collision detection between panels (paper section 3.2, Eq. 7).
 
 ``check_trajectory(model, result, settings) -> CollisionReport`` checks a
-sampled trajectory; :class:`CollisionMonitor` does the same on a stream of
-joint states (``update(t, theta, omega=None) -> events``). What counts as a
+sampled trajectory (:class:`TrajectoryCheck` takes it in blocks as they are
+simulated); :class:`CollisionMonitor` does the same on a stream of joint
+states (``update(t, theta, omega=None) -> events``). What counts as a
 collision, and what is guaranteed between samples, is stated in
 :mod:`panel_deploy.collision.monitor`; distance accuracy in
 :mod:`panel_deploy.collision.geometry`.

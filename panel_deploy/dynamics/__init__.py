@@ -1,13 +1,16 @@
 """Deployment dynamics of a panel array: compiled recursive multibody kernels,
 penalty or exact loop closure, scipy or compiled integrators.
 
-``simulate(model, settings, state=None) -> SimulationResult``; reports from a
-result: ``hinge_release_report``, ``summary``, ``energy_balance_error``.
+``simulate(model, settings, state=None) -> SimulationResult``, or the same run
+in blocks of samples with ``simulate_segments`` (for consumers that stop
+early); reports from a result: ``hinge_release_report``, ``summary``,
+``energy_balance_error``.
 """
 
 from .report import energy_balance_error, hinge_release_report, summary
 from .result import SimulationResult
 from .simulate import default_gap_limit, simulate, simulate_segments
 
-__all__ = ["SimulationResult", "simulate", "simulate_segments", "default_gap_limit", "hinge_release_report",
+__all__ = ["SimulationResult", "simulate", "simulate_segments", "default_gap_limit",
+           "hinge_release_report",
            "summary", "energy_balance_error"]

@@ -1,5 +1,5 @@
-"""Deployment simulation: ``simulate(model, settings) -> SimulationResult``, and the
-reports made from a result (hinge release times, one-dict summary)."""
+"""Deployment simulation: ``simulate(model, settings) -> SimulationResult``, or
+the same run handed out in blocks of samples by ``simulate_segments``."""
 
 from __future__ import annotations
 

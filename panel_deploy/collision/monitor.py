@@ -58,8 +58,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..dynamics.kernels import kinematics
 from ..dynamics.pack import pack
+from ..dynamics.simulate import body_states
 from ..errors import SceneError, TrajectoryError
 from ..model import Model
 from .geometry import BoxSet, PairGeometry
@@ -330,18 +330,10 @@ class CollisionMonitor:
         body order, same values to rounding, ~1e-16) by the compiled dynamics
         kernel: every sample and bisection step needs poses, and the numpy
         version costs ~7x as much per call."""
-        P = self._packed
         theta = np.asarray(theta, dtype=float)
         rates = np.zeros_like(theta) if omega is None else np.asarray(omega, dtype=float)
-        Rk, pk, wk, vo, _ = kinematics(P, theta, rates)
-        R, p = np.empty_like(Rk), np.empty_like(pk)
-        R[P.body], p[P.body] = Rk, pk
-        if omega is None:
-            return R, p
-        v, w = np.empty_like(vo), np.empty_like(wk)
-        # the kernel's vo is the velocity of the body point at the ground origin
-        v[P.body], w[P.body] = vo + np.cross(wk, pk), wk
-        return R, p, v, w
+        R, p, v, w = body_states(self._packed, theta, rates)
+        return (R, p) if omega is None else (R, p, v, w)
 
     def _distances_at(self, theta, rows, radii=False):
         """Exact signed distances of ``rows`` at angles ``theta``, on the scratch boxes

@@ -151,6 +151,23 @@ def simulate_segments(model: Model, settings, state: State | None = None, *,
         y, first = run.y[-1], stop
 
 
+def body_states(P, theta, omega):
+    """Pose and velocity of every body, indexed like ``model.bodies``.
+
+    ``P`` is :func:`~panel_deploy.dynamics.pack.pack` of the model; ``theta``
+    (rad) and ``omega`` (rad/s) are (n,). Returns the rotations (nb, 3, 3),
+    centroids (nb, 3) m, centroid velocities (nb, 3) m/s and angular
+    velocities (nb, 3) rad/s, in the ground frame.
+    """
+    Rk, pk, wk, vo, _ = kernels.kinematics(P, theta, omega)
+    # The kernels put the ground last, and their vo is the velocity of the body
+    # point at the ground origin, not of the centroid.
+    R, p, v, w = np.empty_like(Rk), np.empty_like(pk), np.empty_like(vo), np.empty_like(wk)
+    R[P.body], p[P.body], w[P.body] = Rk, pk, wk
+    v[P.body] = vo + np.cross(wk, pk)
+    return R, p, v, w
+
+
 def _result(P, t, run, method, wall, gap_limit) -> SimulationResult:
     n, s, nb = P.n, len(t), P.n + 1
     Y = run.y
@@ -166,16 +183,13 @@ def _result(P, t, run, method, wall, gap_limit) -> SimulationResult:
     names = ("kinetic", "spring", "gravity", "dissipated", "constraint_work")
     energy = {k: np.empty(s) for k in names}
     for j, y in enumerate(Y):
-        Rj, pj, wj, voj, _ = kernels.kinematics(P, y[:n], y[n:2 * n])
-        # kernels put the ground last; the result is indexed like model.bodies
-        R[j, P.body], p[j, P.body], w[j, P.body] = Rj, pj, wj
-        v[j, P.body] = voj + np.cross(wj, pj)
+        R[j], p[j], v[j], w[j] = body_states(P, y[:n], y[n:2 * n])
         kin, spring, grav, gaps[j], J = kernels.observe(P, y)
         energy["kinetic"][j], energy["spring"][j], energy["gravity"][j] = kin, spring, grav
         energy["dissipated"][j], energy["constraint_work"][j] = y[2 * n], y[2 * n + 1]
         if m:
             sigma[j] = np.linalg.svd(J, compute_uv=False)[::-1][:k_sigma]
-            cut_theta[j] = kernels.cut_angles(P, Rj)
+            cut_theta[j] = kernels.cut_angles(P, R[j, P.body])  # kernel body order
     return SimulationResult(
         t=t, theta=Y[:, :n].copy(), omega=Y[:, n:2 * n].copy(),
         rotation=R, position=p, linear_velocity=v, angular_velocity=w,

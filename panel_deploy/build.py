@@ -83,7 +83,7 @@ def _hinge(name, ia, ib, cells_a, cells_b, segments, stowed, geom, k, c):
     if np.linalg.norm(np.cross(pts - M, axis), axis=1).max() > 1e-12 * max(a, b):
         raise DesignError(f"hinge {name}: segments are not collinear")
     return Hinge(name, ia, ib, M, axis, float(np.dot(N - M, axis)), facet, k, c,
-                 float(angles.pop()), tuple(segments))
+                 float(angles.pop()), tuple(segments), len(segments))
 
 
 def build_model(scene: Scene, design=None) -> Model:

@@ -80,13 +80,18 @@ class Hinge:
         |MN|, m.
     facet : "top" or "bottom"
     k : float
-        Spring stiffness, N m/rad (free at theta = 0).
+        Stiffness of one spring, N m/rad (free at theta = 0).
     c : float
-        Damping coefficient, N m s/rad.
+        Damping coefficient of one spring, N m s/rad.
     theta_stowed : float
         Angle in the stowed state, rad (pi folded, 0 for a hinge that stays flat).
     segments : tuple of ((row, col), (row, col))
         The cell-level hinges (collinear segments) that make up this hinge.
+    springs : int
+        Spring-loaded hinges acting in parallel on this line: one per cell
+        segment, since merging panels joins them into one body but leaves
+        each of its edge hinges (and their springs) in place. The hinge's
+        torque law uses :attr:`k_hinge` and :attr:`c_hinge`.
     """
 
     name: str
@@ -100,17 +105,28 @@ class Hinge:
     c: float
     theta_stowed: float
     segments: tuple
+    springs: int = 1
 
     @property
     def end_n(self) -> np.ndarray:
         """End N of the hinge line in the flat frame, m."""
         return self.point + self.length * self.axis
 
+    @property
+    def k_hinge(self) -> float:
+        """Torsional stiffness of the whole hinge, ``springs * k``, N m/rad."""
+        return self.springs * self.k
+
+    @property
+    def c_hinge(self) -> float:
+        """Damping of the whole hinge, ``springs * c``, N m s/rad."""
+        return self.springs * self.c
+
     def reversed(self) -> "Hinge":
         """The same hinge with the roles of the two bodies swapped."""
         return Hinge(self.name, self.body_b, self.body_a, self.end_n, -self.axis,
                      self.length, self.facet, self.k, self.c, self.theta_stowed,
-                     self.segments)
+                     self.segments, self.springs)
 
 
 @dataclass(frozen=True)
@@ -199,11 +215,13 @@ class Model:
 
     @property
     def stiffness(self) -> np.ndarray:
-        """k of every hinge, N m/rad, shape (n_hinges,)."""
+        """k of every hinge (one spring), N m/rad, shape (n_hinges,)."""
         return np.array([h.k for h in self.hinges])
 
     def with_stiffness(self, k, c=None) -> "Model":
         """A copy with new hinge stiffnesses (and damping), shape (n_hinges,).
+
+        Values are per spring, as :attr:`Hinge.k` and :attr:`Hinge.c`.
 
         Without ``c``, damping keeps each hinge's c/k ratio (Rayleigh damping,
         paper section 3.3); a hinge whose old k is 0 keeps its c.
@@ -216,7 +234,7 @@ class Model:
         c = np.asarray(c, dtype=float)
         hinges = tuple(
             Hinge(h.name, h.body_a, h.body_b, h.point, h.axis, h.length, h.facet,
-                  float(kk), float(cc), h.theta_stowed, h.segments)
+                  float(kk), float(cc), h.theta_stowed, h.segments, h.springs)
             for h, kk, cc in zip(self.hinges, k, c))
         return Model(self.bodies, hinges, self.ground, self.joints, self.parent,
                      self.body_joint, self.order, self.cut_hinges, self.k_s, self.c_s,

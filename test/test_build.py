@@ -43,6 +43,10 @@ def test_paper_bodies_and_hinges(model):
     assert len(model.cut_hinges) == 1 and model.n_coords == 11
     long = [h for h in model.hinges if len(h.segments) == 2]
     assert len(long) == 2 and all(h.length == pytest.approx(0.2) for h in long)
+    # each segment keeps its own spring: the long hinges act with 2 k and 2 c
+    assert all(h.springs == len(h.segments) for h in model.hinges)
+    assert all(h.k_hinge == pytest.approx(0.2) and h.c_hinge == pytest.approx(0.0086)
+               for h in long)
     for h in model.hinges:
         assert np.linalg.norm(h.axis) == pytest.approx(1.0)
         assert h.k == pytest.approx(0.1) and h.c == pytest.approx(0.0043)

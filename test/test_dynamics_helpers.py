@@ -12,16 +12,17 @@ def panel(name, x, y, mass=MASS):
     return Body(name, (), SIZE.copy(), mass, box_inertia(mass, SIZE), np.array([x, y, 0.0]))
 
 
-def hinge(name, a, b, point, axis, k=0.1, c=0.0043, theta_stowed=np.pi, length=B):
+def hinge(name, a, b, point, axis, k=0.1, c=0.0043, theta_stowed=np.pi, length=B, springs=1):
     axis = np.asarray(axis, float)
     return Hinge(name, a, b, np.asarray(point, float), axis / np.linalg.norm(axis), length,
-                 "top", k, c, theta_stowed, ())
+                 "top", k, c, theta_stowed, (), springs)
 
 
-def plate_on_hinge(k=0.1, c=0.0043, gravity=(0.0, 0.0, 0.0), k_s=1000.0, c_s=0.5):
-    """Ground panel and one panel hinged on their shared edge x = A/2, top facet."""
+def plate_on_hinge(k=0.1, c=0.0043, gravity=(0.0, 0.0, 0.0), k_s=1000.0, c_s=0.5, springs=1):
+    """Ground panel and one panel hinged on their shared edge x = A/2, top facet,
+    by ``springs`` spring-loaded hinges in parallel (k, c each)."""
     bodies = [panel("G", 0.0, 0.0), panel("P", A, 0.0)]
-    hinges = [hinge("h", 0, 1, (A / 2, B / 2, T / 2), (0, -1, 0), k, c)]
+    hinges = [hinge("h", 0, 1, (A / 2, B / 2, T / 2), (0, -1, 0), k, c, springs=springs)]
     return Model.build(bodies, hinges, 0, k_s=k_s, c_s=c_s, gravity=gravity)
 
 
@@ -35,9 +36,10 @@ def random_branched(seed=0, closure="penalty", gravity=(0.3, -9.81, 1.0)):
         inertia = 1e-5 * (X @ X.T + np.eye(3))
         bodies.append(Body(f"b{i}", (), SIZE.copy(), m, inertia, rng.uniform(-0.2, 0.2, 3)))
     edges = [(0, 1), (1, 2), (1, 3), (0, 4), (4, 5), (2, 5)]
+    # every other hinge, the cut one (2-5) among them, has two springs in parallel
     hinges = [hinge(f"h{a}{b}", a, b, rng.uniform(-0.2, 0.2, 3), rng.normal(size=3),
-                    k=rng.uniform(0.05, 0.2), c=rng.uniform(0.001, 0.01))
-              for a, b in edges]
+                    k=rng.uniform(0.05, 0.2), c=rng.uniform(0.001, 0.01), springs=1 + i % 2)
+              for i, (a, b) in enumerate(edges)]
     cl = ClosureParameters(closure, 1e4, 30.0, 2e4, 20.0, 1e-3, 1e-10)
     return Model.build(bodies, hinges, 0, k_s=500.0, c_s=0.3, closure=cl, gravity=gravity)
 

@@ -42,11 +42,11 @@ def cut_angle(model, R, j):
 def potential(model, theta):
     R, p = forward_kinematics(model, theta)
     V = -sum(b.mass * model.gravity @ (p[i] - b.flat_position) for i, b in enumerate(model.bodies))
-    V += sum(law(th, 0.0, model.hinges[h].k, 0, model.k_s, 0)[1] for th, h in zip(theta, model.joints))
+    V += sum(law(th, 0.0, model.hinges[h].k_hinge, 0, model.k_s, 0)[1] for th, h in zip(theta, model.joints))
     cl = model.closure
     for j, hc in enumerate(model.cut_hinges):
         h = model.hinges[hc]
-        V += law(cut_angle(model, R, j), 0.0, h.k, 0, model.k_s, 0)[1]
+        V += law(cut_angle(model, R, j), 0.0, h.k_hinge, 0, model.k_s, 0)[1]
         if cl.method == "penalty":
             Ma, Na, Mb, Nb = hinge_points(model, R, p, hc)
             u = R[h.body_a] @ h.axis
@@ -83,14 +83,14 @@ def reference_qdd(model, theta, omega):
     dM = fd(lambda q: mass_matrix(model, q), theta, 1e-4)  # (n, n, n): d M / d q_k
     coriolis = np.einsum("ijk,k,j->i", dM, omega, omega) - 0.5 * np.einsum("jki,j,k->i", dM, omega, omega)
     Q = -fd(lambda q: potential(model, q), theta)
-    Q -= np.array([(model.hinges[h].c + (model.c_s if not 0 <= th <= np.pi else 0.0)) * w
+    Q -= np.array([(model.hinges[h].c_hinge + (model.c_s if not 0 <= th <= np.pi else 0.0)) * w
                    for th, w, h in zip(theta, omega, model.joints)])
     cl = model.closure
     for j, hc in enumerate(model.cut_hinges):
         h = model.hinges[hc]
         G = fd(lambda q: cut_angle(model, forward_kinematics(model, q)[0], j), theta)
         th_c = cut_angle(model, forward_kinematics(model, theta)[0], j)
-        c_tot = h.c + (model.c_s if not 0 <= th_c <= np.pi else 0.0)
+        c_tot = h.c_hinge + (model.c_s if not 0 <= th_c <= np.pi else 0.0)
         Q -= c_tot * (G @ omega) * G
         if cl.method == "penalty":
             def ends(q):

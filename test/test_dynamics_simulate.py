@@ -25,7 +25,7 @@ def plate_reference(model, theta0, t):
     def f(_, x):
         r = axis_rotation(h.axis, x[0]) @ r0
         tau_g = h.axis @ np.cross(r, body.mass * model.gravity)
-        return [x[1], (-h.k * x[0] - h.c * x[1] + tau_g) / I_h]
+        return [x[1], (-h.k_hinge * x[0] - h.c_hinge * x[1] + tau_g) / I_h]
 
     return solve_ivp(f, (0, t[-1]), [theta0, 0.0], t_eval=t, rtol=1e-12, atol=1e-12).y
 
@@ -50,6 +50,19 @@ def test_plate_matches_scalar_ode(method, scheme, gravity):
     r0 = model.bodies[1].flat_position - h.point
     expected = h.point + np.array([axis_rotation(h.axis, th) @ r0 for th in ref[0]])
     assert np.abs(r.position[:, 1] - expected).max() < 1e-7
+
+
+@pytest.mark.parametrize("method", ["RK45", "compiled"])
+def test_parallel_springs_add(method):
+    # two springs of k, c on one hinge line act as one of 2 k, 2 c
+    model = plate_on_hinge(k=0.05, c=0.01, springs=2)
+    state = State(0.0, np.array([1.0]), np.zeros(1))
+    r = simulate(model, SimulationSection(t_end=0.3, method=method, rtol=1e-9, atol=1e-11,
+                                          samples=61), state)
+    assert r.success, r.message
+    single = plate_on_hinge(k=0.1, c=0.02)
+    assert np.abs(r.theta[:, 0] - plate_reference(single, 1.0, r.t)[0]).max() < 1e-6
+    assert r.energy["spring"][0] == pytest.approx(0.5 * 0.1 * 1.0**2)
 
 
 def total_energy(r):

@@ -226,7 +226,7 @@ def export_mjcf(model: Model, *, timestep: float = 1e-5, integrator: str = "RK4"
             lines.append(
                 f"{pad}  <joint name={_name(h.name)} type=\"hinge\" "
                 f'pos="{_vec(h.point - body.flat_position)}" axis="{_vec(h.axis)}" '
-                f'stiffness="{_f(h.k)}" springref="0" damping="{_f(h.c)}" armature="0" '
+                f'stiffness="{_f(h.k_hinge)}" springref="0" damping="{_f(h.c_hinge)}" armature="0" '
                 f'frictionloss="0" range="0 {_f(math.pi)}" '
                 f'solreflimit="{_f(-K)} {_f(-B)}" solimplimit={imp}/>')
         lines.append(f'{pad}  <geom name={_name(body.name)} type="box" size="{_vec(0.5 * body.size)}"/>')
@@ -259,7 +259,7 @@ def export_mjcf(model: Model, *, timestep: float = 1e-5, integrator: str = "RK4"
             lines.append(f"    <general name={_name(f'{h.name}_spring')} "
                          f"site={_name(f'{h.name}_M_b')} refsite={_name(f'{h.name}_M_a')} "
                          f'gear="0 0 0 {_vec(h.axis)}" gainprm="0" biastype="affine" '
-                         f'biasprm="{_f(-0.5 * math.pi * h.k)} {_f(-h.k)} {_f(-h.c)}"/>')
+                         f'biasprm="{_f(-0.5 * math.pi * h.k_hinge)} {_f(-h.k_hinge)} {_f(-h.c_hinge)}"/>')
         lines.append("  </actuator>")
     qpos = np.empty(model.n_coords)
     qpos[qpos_index(model)] = model.theta_stowed

@@ -257,8 +257,8 @@ _bounds.describe = "[lower, upper]"
 @dataclass(frozen=True)
 class OptimisationSection:
     p: float = spec(1.0, number(0.0), "s/m", "weight of the approach speed v in f = p v - q d")
-    q: float = spec(10.0, number(0.0), "1/m", "weight of the smallest distance d")
-    flat_weight: float = spec(1.0, number(0.0), "1/rad", "weight of the largest hinge angle left at t_end")
+    q: float = spec(10.0, number(0.0), "1/m", "weight of the smallest distance d (earned only by a collision-free run that reaches flat)")
+    flat_weight: float = spec(1.0, number(0.0), "1/rad", "weight of how far from flat the run stays (its closest approach: the smallest, over samples, of the largest |theta|)")
     bounds: tuple = spec((0.001, 0.2), _bounds, "N m/rad", "lower and upper stiffness bound")
     k0: float = spec(0.1, number(0, low_open=True), "N m/rad", "starting stiffness K_0")
     method: str = spec("local", choice("local", "global"), "", "local (scipy minimize) or global (differential evolution)")

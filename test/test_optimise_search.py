@@ -14,7 +14,8 @@ import pytest
 
 from panel_deploy.errors import OptimisationError
 from panel_deploy.model import Body, Hinge, Model, box_inertia
-from panel_deploy.optimise import (Outcome, StiffnessProblem, evaluate, objective, optimise)
+from panel_deploy.optimise import (FLAT_TOLERANCE, Outcome, StiffnessProblem, evaluate,
+                                   objective, optimise)
 from panel_deploy.scene import scene_from_dict
 
 A, T, MASS = 0.1, 0.005, 0.02
@@ -73,7 +74,12 @@ def test_objective_is_eq8_plus_flat_term():
     o = Outcome(collided=False, v=0.0, d=0.01, flat_residual=0.01)
     assert objective(o, 2.0, 10.0, 1.0) == pytest.approx(-0.1)        # flat: the paper's f
     o = Outcome(collided=False, v=0.0, d=0.01, flat_residual=1.05)
-    assert objective(o, 2.0, 10.0, 3.0) == pytest.approx(-0.1 + 3.0)  # 1 rad past tolerance
+    assert objective(o, 2.0, 10.0, 3.0) == pytest.approx(3.0)  # 1 rad past tolerance, no d
+    # never flat is a failure: no clearance earns it a better score than a feasible run
+    near = Outcome(collided=False, v=0.0, d=0.05, flat_residual=FLAT_TOLERANCE + 0.1)
+    tight = Outcome(collided=False, v=0.0, d=0.001, flat_residual=0.0)
+    assert objective(near, 1.0, 10.0, 1.0) == pytest.approx(0.1)
+    assert objective(tight, 1.0, 10.0, 1.0) < 0 < objective(near, 1.0, 10.0, 1.0)
     failed = Outcome(collided=False, v=0.0, d=0.05, flat_residual=0.0, simulated=False)
     assert objective(failed, 1.0, 10.0, 1.0) > objective(
         Outcome(collided=True, v=3.0, d=0.0, flat_residual=math.pi), 1.0, 10.0, 1.0)

@@ -15,7 +15,7 @@ point in body ``i``'s frame is ``point - bodies[i].flat_position``.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -124,9 +124,8 @@ class Hinge:
 
     def reversed(self) -> "Hinge":
         """The same hinge with the roles of the two bodies swapped."""
-        return Hinge(self.name, self.body_b, self.body_a, self.end_n, -self.axis,
-                     self.length, self.facet, self.k, self.c, self.theta_stowed,
-                     self.segments, self.springs)
+        return replace(self, body_a=self.body_b, body_b=self.body_a, point=self.end_n,
+                       axis=-self.axis)
 
 
 @dataclass(frozen=True)
@@ -232,10 +231,7 @@ class Model:
         if c is None:
             c = [h.c * (kk / h.k) if h.k > 0 else h.c for h, kk in zip(self.hinges, k)]
         c = np.asarray(c, dtype=float)
-        hinges = tuple(
-            Hinge(h.name, h.body_a, h.body_b, h.point, h.axis, h.length, h.facet,
-                  float(kk), float(cc), h.theta_stowed, h.segments, h.springs)
-            for h, kk, cc in zip(self.hinges, k, c))
+        hinges = tuple(replace(h, k=float(kk), c=float(cc)) for h, kk, cc in zip(self.hinges, k, c))
         return Model(self.bodies, hinges, self.ground, self.joints, self.parent,
                      self.body_joint, self.order, self.cut_hinges, self.k_s, self.c_s,
                      self.closure, self.gravity, self.collision_pairs, self.metadata)

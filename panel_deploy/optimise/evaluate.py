@@ -115,10 +115,10 @@ def objective(outcome: Outcome, p: float, q: float, flat_weight: float) -> float
     0.1 m/s approach, a 10 mm clearance and a 0.1 rad leftover angle all
     score 0.1.
 
-    A run that never lies flat earns no clearance (d counts as 0), as a
-    colliding one does not (:attr:`Outcome.d`): not reaching flat is as much
-    a failure as a collision, so every feasible run (f <= 0) scores better
-    than every infeasible one (f >= 0). Otherwise a run that swings close to
+    Only a feasible run earns clearance: a colliding one has d = 0 already
+    (:attr:`Outcome.d`, Eq. 8), and one that never lies flat counts d as 0,
+    since not reaching flat is as much a failure as a collision. So every
+    feasible run (f <= 0) scores better than every infeasible one (f >= 0). Otherwise a run that swings close to
     flat and falls back, keeping the panels far apart, outscores one that
     deploys with less room: on the paper scene differential evolution kept
     such a run, 0.15 rad from flat with d = 45 mm, at f = -0.35.
@@ -128,7 +128,7 @@ def objective(outcome: Outcome, p: float, q: float, flat_weight: float) -> float
     """
     if not outcome.simulated:
         return p * FAILED_SPEED + flat_weight * math.pi
-    d = outcome.d if outcome.reached_flat else 0.0
+    d = outcome.d if outcome.feasible else 0.0
     return p * outcome.v - q * d + flat_weight * max(0.0, outcome.flat_residual - FLAT_TOLERANCE)
 
 

@@ -6,10 +6,12 @@ collision check, flat residual), on all cores. Prints how many K are
 collision-free, reach flat, both, and which pairs collide first.
 
     python bench/scan_stiffness.py [SCENE] [--n 80] [--seed 0] [--workers N]
-                                   [--min GROUP=K ...] [--max GROUP=K ...] [--set KEY=VALUE ...]
+                                   [--min GROUP=K ...] [--max GROUP=K ...]
+                                   [--around RESULT.yaml [--spread 0.15]] [--set KEY=VALUE ...]
 
 GROUP is any hinge name of the group (e.g. ``--min r3c2-r4c2=0.09`` samples
 that group only from 0.09 N m/rad up); the other groups span the scene's bounds.
+``--around`` samples within ``--spread`` decades of a result file's K instead.
 """
 
 from __future__ import annotations
@@ -21,14 +23,14 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import qmc
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from panel_deploy.bench.sampling import latin_hypercube, neighbourhood  # noqa: E402
 from panel_deploy.build import build_model  # noqa: E402
 from panel_deploy.cli import resolve_scene  # noqa: E402
-from panel_deploy.optimise import StiffnessProblem  # noqa: E402
+from panel_deploy.optimise import StiffnessProblem, load_stiffness  # noqa: E402
 from panel_deploy.optimise.parallel import Evaluator, Job, make_backend  # noqa: E402
 from panel_deploy.optimise.search import search_settings  # noqa: E402
 from panel_deploy.scene import load_scene  # noqa: E402
@@ -55,6 +57,8 @@ def main(argv=None):
     p.add_argument("--workers", type=int, default=0)
     p.add_argument("--min", action="append", default=[], metavar="HINGE=K")
     p.add_argument("--max", action="append", default=[], metavar="HINGE=K")
+    p.add_argument("--around", metavar="RESULT.yaml", help="sample near this result's K")
+    p.add_argument("--spread", type=float, default=0.15, help="decades of k, with --around")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = p.parse_args(argv)
 
@@ -62,13 +66,16 @@ def main(argv=None):
     model = build_model(scene)
     opt = scene.optimisation
     problem = StiffnessProblem.from_model(model, opt.bounds, opt.k0)
-    lo = np.log10(group_limits(problem, args.min, opt.bounds[0]))
-    hi = np.log10(group_limits(problem, args.max, opt.bounds[1]))
-    x = lo + (hi - lo) * qmc.LatinHypercube(d=problem.n, seed=args.seed).random(args.n)
+    if args.around:
+        lo, hi = neighbourhood(problem, load_stiffness(args.around, model), args.spread)
+    else:
+        lo = np.log10(group_limits(problem, args.min, opt.bounds[0]))
+        hi = np.log10(group_limits(problem, args.max, opt.bounds[1]))
+    ks = latin_hypercube(problem, lo, hi, args.n, args.seed)
     backend = make_backend(Job(model, search_settings(scene)), args.workers)
     start = time.perf_counter()
     try:
-        evals = Evaluator(backend, args.n).map([problem.k_of(xi) for xi in x])
+        evals = Evaluator(backend, args.n).map(ks)
     finally:
         backend.close()
     wall = time.perf_counter() - start

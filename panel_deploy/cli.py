@@ -147,6 +147,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--dask", metavar="ADDRESS", help="run evaluations on this Dask scheduler")
     s.add_argument("--method", choices=("local", "global"), help="override optimisation.method")
     s.add_argument("--max-evaluations", type=int, help="override optimisation.max_evaluations")
+    s.add_argument("--start", metavar="RESULT.yaml",
+                   help="start from this result's K instead of optimisation.k0")
     s.add_argument("--springs", type=_stiffness_list,
                    help="available spring stiffnesses, N m/rad, comma-separated")
     s.add_argument("--perturb", type=int, default=0, help="tolerance check: perturbed copies")

@@ -91,6 +91,26 @@ def test_simulate_takes_stiffness_from_a_result_file(capsys, tmp_path):
     assert code == 2 and "stiffness file" in err and len(err.strip().splitlines()) == 1
 
 
+def test_optimise_starts_from_a_result_file(capsys, tmp_path):
+    from panel_deploy.build import build_model
+    from panel_deploy.scene import load_scene
+    model = build_model(load_scene(PAPER))
+    k = {h.name: 0.05 for h in model.hinges}
+    k["r2c2-r3c2"] = 0.02
+    start = tmp_path / "start.yaml"
+    start.write_text("hinges:\n" + "".join(f"  {n}: {{k: {v}}}\n" for n, v in k.items()))
+    code, out, _ = run(capsys, "optimise", PAPER, "--start", str(start), "--max-evaluations", "1",
+                       "--workers", "1", "--quiet", "--json")
+    data = json.loads(out)
+    assert code == 1 and data["nfev"] == 1  # K_0 of this start collides
+    assert {n: h["k"] for n, h in data["hinges"].items()} == pytest.approx(k)
+    k["r1c3-r1c4"] = 0.06  # its mirror twin r1c1-r1c2 stays at 0.05
+    start.write_text("hinges:\n" + "".join(f"  {n}: {{k: {v}}}\n" for n, v in k.items()))
+    code, _, err = run(capsys, "optimise", PAPER, "--start", str(start), "--quiet")
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "k0: hinges r1c1-r1c2 and r1c3-r1c4 share groups[0]" in err
+
+
 def test_sigterm_during_optimise_saves_the_best_so_far(tmp_path):
     # The optimiser is stopped once its first batch has been reported; the result
     # file must hold that batch's best K, readable back as stiffness.

@@ -136,6 +136,16 @@ def test_global_search_finds_the_known_optimum():
     assert res.nfev <= 150
 
 
+def test_search_goes_on_from_a_previous_results_per_hinge_k():
+    first = optimise(chain_model(), scene(max_evaluations=12), workers=1, evaluation=bowl_outcome,
+                     groups=[["h0", "h2"]])
+    again = optimise(chain_model(), scene(max_evaluations=12), workers=1, evaluation=bowl_outcome,
+                     groups=[["h0", "h2"]], k0=first.k)
+    np.testing.assert_array_equal(again.initial.k, first.k)
+    np.testing.assert_array_equal(again.problem.k0, first.k[[0, 1]])
+    assert again.f <= first.f
+
+
 def test_budget_is_respected():
     res = optimise(chain_model(), scene(max_evaluations=9), workers=1, evaluation=bowl_outcome)
     assert res.nfev <= 9 and res.status in (1, 2)
@@ -169,6 +179,7 @@ def test_process_pool_gives_the_serial_result():
     ({"groups": [["h0", "nope"]]}, "groups[0]"),
     ({"groups": [[0, 1], [1, 2]]}, "groups[1]"),
     ({"groups": [[7]]}, "groups[0]"),
+    ({"k0": [0.1, 0.05, 0.2], "groups": [["h0", "h2"]]}, "k0"),
 ])
 def test_bad_problem_names_the_field(kwargs, field):
     model = chain_model()

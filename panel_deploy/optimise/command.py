@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import sys
 
-from .io import dump_result, result_to_dict, save_result
+from .io import dump_result, load_stiffness, result_to_dict, save_result
 from .manufacture import snap_to_springs, tolerance_check, verify
 from .search import optimise, print_progress
 
@@ -20,6 +20,8 @@ def optimise_command(args, scene) -> int:
     - ``dask`` [--dask ADDRESS]: Dask scheduler to run the evaluations on.
     - ``method`` [--method local|global], ``max_evaluations`` [--max-evaluations N]:
       override the scene.
+    - ``start`` [--start RESULT.yaml]: start from this result's K instead of
+      the scene's ``optimisation.k0`` (to go on from an earlier search).
     - ``springs`` [--springs 0.07,0.1]: available spring stiffnesses (N m/rad);
       snap the optimum to them (up to two in parallel, hinges ten times softer
       than the rest unsprung) and re-verify.
@@ -39,7 +41,8 @@ def optimise_command(args, scene) -> int:
                       dask_address=arg("dask"),
                       progress=None if quiet else (lambda p: print_progress(p, sys.stderr)),
                       method=arg("method"),
-                      max_evaluations=arg("max_evaluations"))
+                      max_evaluations=arg("max_evaluations"),
+                      k0=load_stiffness(arg("start"), model) if arg("start") else None)
     extra = {}
     if result.status == 3:
         # Ctrl-C again would lose the file: save what there is, skip the checks.

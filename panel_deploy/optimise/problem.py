@@ -48,8 +48,9 @@ class StiffnessProblem:
         model : Model
         bounds : (lower, upper)
             N m/rad.
-        k0 : float or (n_groups,) array_like
-            N m/rad.
+        k0 : float, (n_groups,) or (n_hinges,) array_like
+            N m/rad. Per hinge (e.g. a previous result's K), the hinges of
+            one group must agree.
         groups : sequence of sequence of (int or str), optional
             Hinge indices or names sharing one stiffness; hinges in no group
             get a group of their own. Default:
@@ -67,9 +68,11 @@ class StiffnessProblem:
         k0 = np.asarray(k0, dtype=float)
         if k0.ndim == 0:
             k0 = np.full(len(groups), float(k0))
+        elif k0.shape == (len(names),):
+            k0 = _per_group(k0, groups, names)
         if k0.shape != (len(groups),):
-            raise OptimisationError(f"k0: expected one value or {len(groups)} (one per group), "
-                                    f"got shape {k0.shape}")
+            raise OptimisationError(f"k0: expected one value, {len(groups)} (one per group) or "
+                                    f"{len(names)} (one per hinge), got shape {k0.shape}")
         if not np.all(np.isfinite(k0)) or np.any(k0 < lo) or np.any(k0 > hi):
             raise OptimisationError(f"k0: {np.array2string(k0, precision=4)} N m/rad is outside "
                                     f"bounds [{lo:g}, {hi:g}]")
@@ -104,6 +107,17 @@ class StiffnessProblem:
     def group_names(self) -> list:
         """Hinge names of every group."""
         return [[self.hinge_names[i] for i in g] for g in self.groups]
+
+
+def _per_group(k, groups, names):
+    """One value per group from per-hinge ``k``, whose group members must agree."""
+    for gi, idx in enumerate(groups):
+        for i in idx[1:]:
+            if not math.isclose(k[i], k[idx[0]], rel_tol=1e-9):
+                raise OptimisationError(
+                    f"k0: hinges {names[idx[0]]} and {names[i]} share groups[{gi}] but start at "
+                    f"{k[idx[0]]:g} and {k[i]:g} N m/rad")
+    return np.array([k[idx[0]] for idx in groups])
 
 
 def _check_bounds(bounds):

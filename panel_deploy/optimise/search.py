@@ -139,9 +139,10 @@ def optimise(model, settings, *, workers=None, dask_address=None, progress: Call
         Called with a :class:`Progress` after every batch of evaluations.
     groups : sequence of sequence of (int or str), optional
         Override ``model.metadata["hinge_groups"]``.
-    k0 : float or (n_groups,) array_like, optional
-        Starting stiffness (N m/rad), one value or one per group; default
-        the scene's ``optimisation.k0``.
+    k0 : float, (n_groups,) or (n_hinges,) array_like, optional
+        Starting stiffness (N m/rad): one value, one per group, or one per
+        hinge (a previous result's K, to go on from it); default the
+        scene's ``optimisation.k0``.
     method, max_evaluations, restarts, seed : optional
         Override the scene's values.
     fd_step : float

@@ -27,51 +27,21 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from panel_deploy.bench.sampling import latin_hypercube, neighbourhood  # noqa: E402
-from panel_deploy.build import build_model  # noqa: E402
-from panel_deploy.cli import resolve_scene  # noqa: E402
-from panel_deploy.optimise import StiffnessProblem, load_stiffness  # noqa: E402
+from panel_deploy.bench import sampling  # noqa: E402
+from panel_deploy.errors import PanelDeployError  # noqa: E402
 from panel_deploy.optimise.parallel import Evaluator, Job, make_backend  # noqa: E402
 from panel_deploy.optimise.search import search_settings  # noqa: E402
-from panel_deploy.scene import load_scene  # noqa: E402
-
-
-def group_limits(problem, items, default):
-    """Per-group stiffness limits from ``hinge=value`` items, else ``default``."""
-    limits = np.full(problem.n, float(default))
-    for item in items:
-        name, _, value = item.partition("=")
-        hits = [g for g, idx in enumerate(problem.groups)
-                if name in (problem.hinge_names[i] for i in idx)]
-        if not hits:
-            sys.exit(f"scan: no hinge named {name!r} (hinges: {', '.join(problem.hinge_names)})")
-        limits[hits[0]] = float(value)
-    return limits
 
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("scene", nargs="?", default="paper_4x4")
-    p.add_argument("--n", type=int, default=80)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=0)
-    p.add_argument("--min", action="append", default=[], metavar="HINGE=K")
-    p.add_argument("--max", action="append", default=[], metavar="HINGE=K")
-    p.add_argument("--around", metavar="RESULT.yaml", help="sample near this result's K")
-    p.add_argument("--spread", type=float, default=0.15, help="decades of k, with --around")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    sampling.add_arguments(p, n=80, spread=0.15)
     args = p.parse_args(argv)
-
-    scene = load_scene(resolve_scene(args.scene), args.set)
-    model = build_model(scene)
-    opt = scene.optimisation
-    problem = StiffnessProblem.from_model(model, opt.bounds, opt.k0)
-    if args.around:
-        lo, hi = neighbourhood(problem, load_stiffness(args.around, model), args.spread)
-    else:
-        lo = np.log10(group_limits(problem, args.min, opt.bounds[0]))
-        hi = np.log10(group_limits(problem, args.max, opt.bounds[1]))
-    ks = latin_hypercube(problem, lo, hi, args.n, args.seed)
+    try:
+        scene, model, problem, ks, (lo, hi), what = sampling.sample(args)
+    except PanelDeployError as e:
+        sys.exit(f"scan_stiffness: {e}")
+    print(f"scene {scene.name}{' with ' + ', '.join(args.set) if args.set else ''}: {what}")
     backend = make_backend(Job(model, search_settings(scene)), args.workers)
     start = time.perf_counter()
     try:

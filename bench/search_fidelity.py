@@ -11,8 +11,9 @@ and in clearance d (m) and closest approach to flat r (rad) where neither
 does.
 
     python bench/search_fidelity.py [SCENE] [--n 40] [--seed 0] [--workers N]
-                                    [--rtol 1e-3 --rtol 1e-2 ...]
-                                    [--around RESULT.yaml [--spread 0.1]] [--set KEY=VALUE ...]
+                                    [--rtol 1e-3 --rtol 1e-2 ...] [--min HINGE=K ...]
+                                    [--max HINGE=K ...] [--around RESULT.yaml [--spread 0.1]]
+                                    [--set KEY=VALUE ...]
 
 ``--around`` samples near a result file's K (where a search polishing its
 optimum evaluates) instead of over the whole box.
@@ -34,12 +35,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from panel_deploy.bench.sampling import latin_hypercube, neighbourhood  # noqa: E402
-from panel_deploy.build import build_model  # noqa: E402
-from panel_deploy.cli import resolve_scene  # noqa: E402
-from panel_deploy.optimise import StiffnessProblem, load_stiffness  # noqa: E402
+from panel_deploy.bench import sampling  # noqa: E402
+from panel_deploy.errors import PanelDeployError  # noqa: E402
 from panel_deploy.optimise.parallel import Evaluator, Job, make_backend  # noqa: E402
-from panel_deploy.scene import load_scene  # noqa: E402
 
 
 def with_rtol(scene, rtol, refine):
@@ -76,31 +74,17 @@ def compare(ref, out):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("scene", nargs="?", default="paper_4x4")
-    p.add_argument("--n", type=int, default=40)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=0)
+    sampling.add_arguments(p, n=40, spread=0.1)
     p.add_argument("--rtol", type=float, action="append", metavar="RTOL",
                    help="candidate search rtol (repeatable; default 1e-3, 3e-3, 1e-2)")
-    p.add_argument("--around", metavar="RESULT.yaml", help="sample near this result's K")
-    p.add_argument("--spread", type=float, default=0.1, help="decades of k, with --around")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = p.parse_args(argv)
+    try:
+        scene, model, _, ks, _, what = sampling.sample(args)
+    except PanelDeployError as e:
+        sys.exit(f"search_fidelity: {e}")
 
-    scene = load_scene(resolve_scene(args.scene), args.set)
-    model = build_model(scene)
-    opt = scene.optimisation
-    problem = StiffnessProblem.from_model(model, opt.bounds, opt.k0)
-    if args.around:
-        lo, hi = neighbourhood(problem, load_stiffness(args.around, model), args.spread)
-    else:
-        lo, hi = np.log10(np.tile(opt.bounds, (problem.n, 1))).T
-    ks = latin_hypercube(problem, lo, hi, args.n, args.seed)
-
-    where = f"within {args.spread} decades of {args.around}" if args.around else "whole box"
     print(f"scene {scene.name}{' with ' + ', '.join(args.set) if args.set else ''}: "
-          f"{args.n} K (Latin hypercube, seed {args.seed}, {where}), "
-          f"samples {scene.simulation.samples}")
+          f"{what}; samples {scene.simulation.samples}")
     start = time.perf_counter()
     ref = run(model, scene, ks, args.workers)
     ref_time = np.median([o.wall_time for o in ref])

@@ -35,6 +35,8 @@ def test_group_limits_take_any_hinge_of_the_group(problem):
     assert np.count_nonzero(limits == 0.001) == problem.n - 2
     with pytest.raises(OptimisationError, match="no hinge named 'nope'"):
         group_limits(problem, ["nope=0.1"], 0.001)
+    with pytest.raises(OptimisationError, match="expected HINGE=K"):
+        group_limits(problem, ["r1c1-r1c2=soft"], 0.001)
 
 
 def test_latin_hypercube_fills_every_stratum_of_the_box(problem):

@@ -53,7 +53,11 @@ def group_limits(problem, items, default) -> np.ndarray:
         if not hits:
             raise OptimisationError(f"{item}: no hinge named {name!r} "
                                     f"(hinges: {', '.join(problem.hinge_names)})")
-        limits[hits[0]] = float(value)
+        try:
+            limits[hits[0]] = float(value)
+        except ValueError:
+            raise OptimisationError(f"{item}: expected HINGE=K with K in N m/rad, "
+                                    f"got K = {value!r}") from None
     return limits
 
 
@@ -79,7 +83,19 @@ def add_arguments(parser: argparse.ArgumentParser, n: int, spread: float) -> Non
 
 
 def sample(args):
-    """Scene, model, problem, the sampled K (list of (n_hinges,) arrays) and a description."""
+    """The stiffness sets ``args`` (of :func:`add_arguments`) ask for.
+
+    Returns
+    -------
+    scene, model, problem
+        As loaded and built from ``args.scene`` and ``args.set``.
+    ks : list of (n_hinges,) ndarray
+        N m/rad.
+    box : (lo, hi)
+        The sampled box, log10 of N m/rad per group.
+    description : str
+        One line saying what was sampled.
+    """
     from ..build import build_model
     from ..cli import resolve_scene
     from ..optimise import StiffnessProblem, load_stiffness

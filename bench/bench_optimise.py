@@ -24,9 +24,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from panel_deploy.build import build_model  # noqa: E402
-from panel_deploy.cli import resolve_scene  # noqa: E402
 from panel_deploy.optimise import optimise, print_progress, save_result, verify  # noqa: E402
-from panel_deploy.scene import load_scene  # noqa: E402
+from panel_deploy.scene import load_scene, resolve_scene  # noqa: E402
 
 
 def describe(label, ev):
@@ -71,8 +70,9 @@ def main(argv=None):
     print(f"evaluations {res.nfev}, iterations {res.nit}, starts {res.nstarts}")
     print(f"wall time {wall:.1f} s; per evaluation: median single run {np.median(times):.2f} s, "
           f"wall / nfev {wall / max(res.nfev, 1):.2f} s")
-    check = verify(model, res.k, scene)
-    describe(f"re-check (rtol {scene.simulation.rtol / 10:g}, samples x 2, "
+    tighten, refine = 10.0, 2
+    check = verify(model, res.k, scene, tighten=tighten, refine=refine)
+    describe(f"re-check (rtol {scene.simulation.rtol / tighten:g}, samples x {refine}, "
              f"collision.refine {scene.collision.refine})", check)
     if args.out:
         save_result(res, args.out, scene.name)

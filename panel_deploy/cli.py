@@ -12,25 +12,12 @@ import os
 import signal
 import sys
 import threading
-from pathlib import Path
 
 from .errors import PanelDeployError, SceneError
 
 
-def resolve_scene(name: str) -> Path:
-    """A scene path, or the name of a scene shipped with the package."""
-    path = Path(name)
-    if path.exists() or path.suffix:
-        return path
-    for base in (Path(__file__).resolve().parent.parent / "config" / "scenes",
-                 Path(sys.prefix) / "share" / "panel_deploy" / "config" / "scenes"):
-        if (base / f"{name}.yaml").exists():
-            return base / f"{name}.yaml"
-    return path
-
-
 def _load(args):
-    from .scene import load_scene
+    from .scene import load_scene, resolve_scene
     return load_scene(resolve_scene(args.scene), getattr(args, "set", None) or ())
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import math
 import re
+import sys
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -365,6 +366,18 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
             raise SceneError(key, f"expected a string, got {_type_name(data[key])}")
     return Scene(**sections, gravity=gravity, name=data.get("name", ""),
                  description=data.get("description", ""), source=source, data=data)
+
+
+def resolve_scene(name: str) -> Path:
+    """A scene path, or the name of a scene shipped with the package (``paper_4x4``)."""
+    path = Path(name)
+    if path.exists() or path.suffix:
+        return path
+    for base in (Path(__file__).resolve().parent.parent / "config" / "scenes",
+                 Path(sys.prefix) / "share" / "panel_deploy" / "config" / "scenes"):
+        if (base / f"{name}.yaml").exists():
+            return base / f"{name}.yaml"
+    return path
 
 
 def load_scene(path, overrides=()) -> Scene:

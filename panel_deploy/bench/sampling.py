@@ -97,9 +97,8 @@ def sample(args):
         One line saying what was sampled.
     """
     from ..build import build_model
-    from ..cli import resolve_scene
     from ..optimise import StiffnessProblem, load_stiffness
-    from ..scene import load_scene
+    from ..scene import load_scene, resolve_scene
 
     scene = load_scene(resolve_scene(args.scene), args.set)
     model = build_model(scene)

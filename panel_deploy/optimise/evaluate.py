@@ -118,9 +118,9 @@ def objective(outcome: Outcome, p: float, q: float, flat_weight: float) -> float
     Only a feasible run earns clearance: a colliding one has d = 0 already
     (:attr:`Outcome.d`, Eq. 8), and one that never lies flat counts d as 0,
     since not reaching flat is as much a failure as a collision. So every
-    feasible run (f <= 0) scores better than every infeasible one (f >= 0). Otherwise a run that swings close to
-    flat and falls back, keeping the panels far apart, outscores one that
-    deploys with less room: on the paper scene differential evolution kept
+    feasible run (f <= 0) scores better than every infeasible one (f >= 0).
+    Otherwise a run that swings close to flat and falls back, keeping the
+    panels far apart, outscores one that deploys with less room: on the paper scene differential evolution kept
     such a run, 0.15 rad from flat with d = 45 mm, at f = -0.35.
 
     A failed simulation scores as a collision at :data:`FAILED_SPEED` that

@@ -200,8 +200,8 @@ def search_settings(settings):
     Looser settings than the scene's are worth it in the search, since the
     caller re-checks the optimum with the scene's own, tightened
     (:func:`~panel_deploy.optimise.manufacture.verify`). Measured on the
-    paper scene (with one spring per L2-L3/L3-L4 line): rtol 1e-3 instead of 1e-4 halves an evaluation and moves
-    K_0's first collision by 5e-6 s; checking collisions at the samples only
+    paper scene (with one spring per L2-L3/L3-L4 line): rtol 1e-3 instead
+    of 1e-4 halves an evaluation and moves K_0's first collision by 5e-6 s; checking collisions at the samples only
     (the paper's D_j) instead of also between them is 2-3.7x faster (K_0
     0.3 s instead of 0.65 s; a collision-free run to 1.26 s 1.0 s instead of
     3.5 s) with the same outcome, the collision time then on the sample grid

@@ -1,0 +1,90 @@
+"""Closure study: when the loop's last hinges release and the array first lies flat,
+with the exact closure and with penalty springs of several stiffnesses k_M = k_N.
+
+    python bench/closure_release.py [SCENE] [--stiffness RESULT.yaml] [--t-end 4]
+                                    [--k-M 1e5 3e5 1e6 2e6 4e6] [--set KEY=VALUE ...]
+
+The paper design passes a singular configuration of its closed loop on the way to
+flat (NOTES.md section 6); this shows how much its deployment owes to the
+compliance of the closure there. Sample spacing and every other setting are the
+scene's (the spacing is kept when --t-end lengthens the run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from panel_deploy.build import build_model  # noqa: E402
+from panel_deploy.dynamics import simulate  # noqa: E402
+from panel_deploy.dynamics.report import hinge_release_report  # noqa: E402
+from panel_deploy.errors import PanelDeployError  # noqa: E402
+from panel_deploy.scene import load_scene, resolve_scene  # noqa: E402
+
+
+def closures(scene, k_m_values):
+    """(label, scene) for the exact closure and for each penalty stiffness (N/m)."""
+    yield "exact", scene.replace(closure=replace(scene.closure, method="exact"))
+    for k in k_m_values:
+        yield f"penalty k_M={k:.0e}", scene.replace(
+            closure=replace(scene.closure, method="penalty", k_M=k, k_N=k))
+
+
+def last_release(report):
+    """(name, time) of the hinge that leaves its stowed angle last; time None if one never does."""
+    hinges = report["hinges"]
+    if report["locked"]:
+        return report["locked"][0], None
+    name = max(hinges, key=lambda n: hinges[n]["released_at"])
+    return name, hinges[name]["released_at"]
+
+
+def when(t):
+    """A sample time (s) or "never"."""
+    return "never" if t is None else f"{t:.3f}"
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scene", nargs="?", default="paper_4x4")
+    p.add_argument("--stiffness", metavar="RESULT.yaml", help="K from an optimisation result (default: the scene's)")
+    p.add_argument("--t-end", type=float, default=4.0, help="s")
+    p.add_argument("--k-M", type=float, nargs="+", default=[1e5, 3e5, 1e6, 2e6, 4e6], help="N/m")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    args = p.parse_args(argv)
+    try:
+        scene = load_scene(resolve_scene(args.scene), args.set)
+        sim = scene.simulation
+        dt = sim.t_end / (sim.samples - 1)
+        scene = scene.replace(simulation=replace(sim, t_end=args.t_end, samples=round(args.t_end / dt) + 1))
+        k = None
+        if args.stiffness:
+            from panel_deploy.optimise import load_stiffness
+            k = load_stiffness(args.stiffness, build_model(scene))
+    except PanelDeployError as e:
+        sys.exit(f"closure_release: {e}")
+    print(f"scene {scene.name}{' with ' + ', '.join(args.set) if args.set else ''}, "
+          f"K {'from ' + args.stiffness if k is not None else 'of the scene'}, t_end {args.t_end} s")
+    print(f"{'closure':20s} {'last hinge to release':>24s} {'at (s)':>7s} {'flat at (s)':>11s} "
+          f"{'max gap (m)':>11s} {'wall (s)':>8s}")
+    for label, variant in closures(scene, args.k_M):
+        model = build_model(variant)
+        if k is not None:
+            model = model.with_stiffness(k)
+        start = time.perf_counter()
+        result = simulate(model, variant.simulation)
+        wall = time.perf_counter() - start
+        report = hinge_release_report(model, result)
+        name, at = last_release(report)
+        gap = result.constraint_gap.max()
+        print(f"{label:20s} {name:>24s} {when(at):>7s} {when(report['flat_at']):>11s} "
+              f"{gap:11.2e} {wall:8.1f}" + ("" if result.success else f"  ({result.message})"))
+
+
+if __name__ == "__main__":
+    main()

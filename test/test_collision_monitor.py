@@ -172,6 +172,25 @@ def test_tunnelling_between_samples_is_caught():
     assert abs(e.t - t_ref) <= step + 2 * rep.settings.time_resolution
 
 
+def test_a_touching_pair_pressing_in_between_samples_is_caught():
+    """P1 and P2 touch (theta = 2 pi / 3) at every sample, and the Hermite motion
+    between the last two presses them ~1.7 mm into each other and back out. That
+    is no pass-through, so only the mid-point check of touching pairs can see it."""
+    th, w, dt = 2 * math.pi / 3, 4.0, 0.01
+    traj = trajectory([0.0, dt, 2 * dt], np.full((3, 2), th), np.array([[-w, -w], [w, w], [-w, -w]]))
+    model = fold_model()
+    tol = CollisionSettings().tolerance
+    sampled = check_trajectory(model, traj, CollisionSettings(refine=False))
+    assert not sampled.collided and np.all(np.abs(sampled.distances) <= tol)
+    rep = check_trajectory(model, traj)
+    e = rep.first_collision
+    assert rep.collided and e.refined and e.names == ("P1", "P2") and e.sample == 2
+    assert rep.counters["contact_midpoints"] == 2
+    t_ref, step = reference_first_interference(model, traj, tol)
+    assert t_ref is not None
+    assert abs(e.t - t_ref) <= step + 2 * rep.settings.time_resolution
+
+
 def slit_model():
     """G (0, 0), P1 (a, 0) hinged to G, Q (0, a) hinged to G, P2 (a, a) hinged to Q.
 

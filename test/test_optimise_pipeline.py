@@ -120,3 +120,31 @@ def test_a_colliding_run_earns_no_clearance_on_the_paper_scene():
     assert ev.outcome.collided and report.collided
     assert report.d > 0.04 and ev.outcome.d == 0.0
     assert ev.f == pytest.approx(ev.outcome.v + max(0.0, ev.outcome.flat_residual - FLAT_TOLERANCE))
+
+
+def test_optimise_command_succeeds_only_if_the_re_check_agrees(monkeypatch, capsys):
+    # One plate, no collision pairs: K_0 lies flat at ~0.04 s, so the search's answer
+    # is feasible; the command must exit 0 only while the re-check agrees, here made
+    # to disagree by re-checking a run too short to reach flat.
+    import json
+    from types import SimpleNamespace
+
+    from panel_deploy.optimise import command
+
+    monkeypatch.setattr("panel_deploy.build.build_model", lambda scene: chain_model(2, beta=BETA))
+    s = short_scene(0.3, samples=31, max_evaluations=1)
+    args = SimpleNamespace(quiet=True, json=True, workers=1)
+    assert command.optimise_command(args, s) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["success"] and data["verification"]["reached_flat"]
+
+    def short_recheck(model, k, settings, **kw):
+        return verify(model, k, settings.replace(simulation=replace(settings.simulation, t_end=0.01)), **kw)
+
+    monkeypatch.setattr(command, "verify", short_recheck)
+    args.quiet = False
+    assert command.optimise_command(args, s) == 1
+    captured = capsys.readouterr()
+    data = json.loads(captured.out)
+    assert data["success"] and not data["verification"]["reached_flat"]
+    assert "re-check" in captured.err and "never flat" in captured.err

@@ -11,7 +11,8 @@ from .search import optimise, print_progress
 
 
 def optimise_command(args, scene) -> int:
-    """Run the optimisation a scene describes; exit code 0 if a feasible K was found.
+    """Run the optimisation a scene describes; exit code 0 if it found a feasible K
+    (collision-free, reaching flat) and the independent re-check of that K agrees, else 1.
 
     ``args`` attributes (all optional except as noted; argparse flags in brackets):
 
@@ -27,7 +28,7 @@ def optimise_command(args, scene) -> int:
       than the rest unsprung) and re-verify.
     - ``perturb`` [--perturb N]: re-simulate N copies with k and c off by up to
       ``perturb_tol`` [--perturb-tol 0.05] and count the collision-free ones.
-    - ``quiet`` [--quiet]: no progress lines (they go to stderr).
+    - ``quiet`` [--quiet]: no progress lines and no re-check line on stderr.
     - ``json`` [--json]: print a one-object JSON summary instead of the YAML.
     """
     from ..build import build_model
@@ -74,6 +75,7 @@ def optimise_command(args, scene) -> int:
     out = arg("out")
     if out:
         save_result(result, out, scene.name, extra)
+    recheck = recheck_verdict(check)
     if arg("json", False):
         print(json.dumps(result_to_dict(result, scene.name, extra)))
     elif not out:
@@ -81,4 +83,24 @@ def optimise_command(args, scene) -> int:
     else:
         print(f"{result.message}: f = {result.f:.5f}, nfev {result.nfev}, "
               f"{result.wall_time:.1f} s -> {out}")
-    return 0 if result.success else 1
+    if out and not arg("json", False):
+        print(recheck)
+    elif not quiet:
+        print(recheck, file=sys.stderr)
+    # A K the search found feasible counts only if the independent re-check agrees.
+    return 0 if result.success and check.outcome.feasible else 1
+
+
+def recheck_verdict(check) -> str:
+    """One line on the re-check of the optimum (the :class:`Evaluation` of :func:`verify`)."""
+    o = check.outcome
+    head = "re-check (rtol / 10, twice the samples): "
+    if not o.simulated:
+        return head + f"the simulation failed ({o.message})"
+    if o.collided:
+        fc = o.first_collision
+        return head + (f"collision at {fc['t']:.4f} s between {fc['pair'][0]} and {fc['pair'][1]}, "
+                       f"approach speed {o.v:.3f} m/s")
+    if not o.reached_flat:
+        return head + f"collision-free but never flat (closest {o.flat_residual:.3f} rad)"
+    return head + f"collision-free and flat, d = {o.d * 1e3:.2f} mm"

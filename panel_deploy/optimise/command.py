@@ -75,7 +75,6 @@ def optimise_command(args, scene) -> int:
     out = arg("out")
     if out:
         save_result(result, out, scene.name, extra)
-    recheck = recheck_verdict(check)
     if arg("json", False):
         print(json.dumps(result_to_dict(result, scene.name, extra)))
     elif not out:
@@ -84,9 +83,9 @@ def optimise_command(args, scene) -> int:
         print(f"{result.message}: f = {result.f:.5f}, nfev {result.nfev}, "
               f"{result.wall_time:.1f} s -> {out}")
     if out and not arg("json", False):
-        print(recheck)
+        print(recheck_verdict(check))
     elif not quiet:
-        print(recheck, file=sys.stderr)
+        print(recheck_verdict(check), file=sys.stderr)
     # A K the search found feasible counts only if the independent re-check agrees.
     return 0 if result.success and check.outcome.feasible else 1
 

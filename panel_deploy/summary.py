@@ -45,7 +45,10 @@ def summary_text(s: dict) -> str:
         first = c["first_collision"]
         d = "none (no pair has cleared the stowed package)" if c["d"] is None else f"{c['d']:.4g} m"
         if first:
-            lines.append(f"first collision at {first['t']:.4g} s between {' and '.join(first['pair'])}, "
+            # The paper counts a deployment complete when the array first lies flat.
+            after = (" (after the array first lay flat: the deployment was complete)"
+                     if s["time_to_flat"] is not None and first["t"] > s["time_to_flat"] else "")
+            lines.append(f"first collision at {first['t']:.4g} s{after} between {' and '.join(first['pair'])}, "
                          f"approach speed v = {c['v']:.4g} m/s; smallest distance before it d = {d}")
         else:
             lines.append(f"no collision; smallest distance d = {d}")

@@ -1,0 +1,23 @@
+"""The text summary of a deployment (panel_deploy.summary)."""
+
+from panel_deploy.summary import summary_text
+
+
+def summary(time_to_flat, t_collision):
+    return {"success": True, "message": "reached t_end", "method": "compiled", "closure": "penalty",
+            "t_end": 2.0, "wall_time": 1.0, "nsteps": 10, "nfev": 50, "flat_tolerance": 0.05,
+            "time_to_flat": time_to_flat, "energy_balance_error": 1e-6, "max_constraint_gap": 1e-4,
+            "min_closure_sigma": None, "release_times": {"h0": 0.01}, "locked_hinges": [],
+            "collision": {"first_collision": {"t": t_collision, "pair": ["A", "B"]},
+                          "d": 0.05, "v": 0.04}}
+
+
+def test_a_collision_after_the_first_flat_is_marked_as_after_the_deployment():
+    text = summary_text(summary(0.835, 0.8358))
+    assert "first collision at 0.8358 s (after the array first lay flat" in text
+
+
+def test_a_collision_before_flat_or_without_flat_is_not():
+    for flat in (0.9, None):
+        line = summary_text(summary(flat, 0.8358)).splitlines()[-1]
+        assert line.startswith("first collision at 0.8358 s between A and B")

@@ -120,8 +120,9 @@ def objective(outcome: Outcome, p: float, q: float, flat_weight: float) -> float
     since not reaching flat is as much a failure as a collision. So every
     feasible run (f <= 0) scores better than every infeasible one (f >= 0).
     Otherwise a run that swings close to flat and falls back, keeping the
-    panels far apart, outscores one that deploys with less room: on the paper scene differential evolution kept
-    such a run, 0.15 rad from flat with d = 45 mm, at f = -0.35.
+    panels far apart, outscores one that deploys with less room: on the
+    paper scene differential evolution kept such a run, 0.15 rad from flat
+    with d = 45 mm, at f = -0.35.
 
     A failed simulation scores as a collision at :data:`FAILED_SPEED` that
     stays folded (residual pi).

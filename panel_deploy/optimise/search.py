@@ -197,15 +197,17 @@ def search_settings(settings):
     """``settings`` as the search evaluates them: ``optimisation.rtol`` and
     ``optimisation.refine`` in place of the scene's own (None keeps them).
 
-    Looser settings than the scene's are worth it in the search, since the
-    caller re-checks the optimum with the scene's own, tightened
+    Looser settings than the scene's can pay in the search, since the caller
+    re-checks the optimum with the scene's own, tightened
     (:func:`~panel_deploy.optimise.manufacture.verify`). Measured on the
-    paper scene (with one spring per L2-L3/L3-L4 line): rtol 1e-3 instead
-    of 1e-4 halves an evaluation and moves K_0's first collision by 5e-6 s; checking collisions at the samples only
-    (the paper's D_j) instead of also between them is 2-3.7x faster (K_0
-    0.3 s instead of 0.65 s; a collision-free run to 1.26 s 1.0 s instead of
-    3.5 s) with the same outcome, the collision time then on the sample grid
-    (0.440 s instead of 0.4393 s). atol keeps its ratio to rtol.
+    paper scene: checking collisions at the samples only (the paper's D_j)
+    instead of also between them is 2-3.7x faster (K_0 0.3 s instead of
+    0.65 s; a collision-free run to 1.26 s 1.0 s instead of 3.5 s) with the
+    same outcome, the collision time then on the sample grid (0.440 s
+    instead of 0.4393 s). rtol 1e-3 instead of 1e-4 halves an evaluation far
+    from the optimum, but near the gravity scene's feasible set it flipped a
+    verdict, so that scene searches at its own rtol. atol keeps its ratio to
+    rtol.
     """
     sim, col, opt = settings.simulation, settings.collision, settings.optimisation
     if opt.rtol is not None:

@@ -2,8 +2,8 @@
 
 Prints K_0's outcome, the optimum (per hinge group), whether it is
 collision-free and flat, its d, the independent re-check at tighter
-tolerances, the evaluations spent, the wall time and the time per
-evaluation (median of the single-run wall times, and wall time / nfev,
+tolerances, the evaluations spent (and those up to the first feasible K),
+the wall time and the time per evaluation (median of the single-run wall times, and wall time / nfev,
 which includes parallel speed-up and solver overhead).
 
     python bench/bench_optimise.py [SCENE] [--workers N] [--method local|global]
@@ -68,6 +68,9 @@ def main(argv=None):
                                                 for h, r in zip(model.hinges, ratio)))
     times = [e.outcome.wall_time for e in res.history]
     print(f"evaluations {res.nfev}, iterations {res.nit}, starts {res.nstarts}")
+    if res.first_feasible is not None:
+        print(f"first feasible K after {res.first_feasible[0]} evaluations, "
+              f"{res.first_feasible[1]:.1f} s")
     print(f"wall time {wall:.1f} s; per evaluation: median single run {np.median(times):.2f} s, "
           f"wall / nfev {wall / max(res.nfev, 1):.2f} s")
     tighten, refine = 10.0, 2

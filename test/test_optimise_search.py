@@ -119,6 +119,11 @@ def test_restart_leaves_a_colliding_plateau():
     assert res.initial.outcome.collided  # K_0 collides, and the gradient there is zero
     assert res.nstarts > 1
     assert res.success and res.k[0] <= 0.01
+    # The first feasible K is recorded when it came back, not at the end.
+    n, t = res.first_feasible
+    assert res.history[n - 1].outcome.feasible
+    assert not any(e.outcome.feasible for e in res.history[:n - 1])
+    assert 0 < t <= res.wall_time
 
 
 def test_no_feasible_point_is_reported_not_raised():
@@ -126,6 +131,7 @@ def test_no_feasible_point_is_reported_not_raised():
                    evaluation=plateau_outcome)
     assert not res.success and res.status == 2 and res.nstarts == 2
     assert "collides" in res.message
+    assert res.first_feasible is None
 
 
 def test_global_search_finds_the_known_optimum():

@@ -16,6 +16,7 @@ Format (``format: panel_deploy.stiffness/1``)::
     flat_residual: 0.003         # rad, closest approach to flat (largest |theta|) before any collision
     initial: {f, v, d, collision, ...}   # the same for K_0
     success, status, message, nfev, nit, nstarts, method, wall_time
+    first_feasible: {nfev, wall_time}    # when the first feasible K came back, or null
 
 :func:`load_stiffness` reads only ``hinges`` (and accepts a plain
 ``{hinge: k}`` mapping there), so hand-written files work too.
@@ -51,7 +52,10 @@ def result_to_dict(result, scene_name: str = "", extra: dict | None = None) -> d
     out["initial"] = result.initial.summary() if result.initial is not None else None
     out.update(success=bool(result.success), status=int(result.status), message=result.message,
                nfev=int(result.nfev), nit=int(result.nit), nstarts=int(result.nstarts),
-               method=result.method, wall_time=round(float(result.wall_time), 3))
+               method=result.method, wall_time=round(float(result.wall_time), 3),
+               first_feasible=None if result.first_feasible is None else
+               {"nfev": int(result.first_feasible[0]),
+                "wall_time": round(float(result.first_feasible[1]), 3)})
     out.update(extra or {})
     return out
 

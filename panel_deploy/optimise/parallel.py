@@ -165,6 +165,8 @@ class Evaluator:
         self.cache = {}
         self.history = []
         self.best = None
+        #: (evaluations, s since the start) when the first feasible K came back, or None.
+        self.first_feasible = None
         self.start = time.perf_counter()
 
     @property
@@ -197,6 +199,8 @@ class Evaluator:
                 self.history.append(ev)
                 if self.best is None or _better(ev, self.best):
                     self.best = ev
+                if self.first_feasible is None and ev.outcome.feasible:
+                    self.first_feasible = (self.nfev, self.elapsed)
             if self.on_batch is not None:
                 self.on_batch()
         return [self.cache[key] for key in keys]

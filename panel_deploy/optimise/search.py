@@ -84,6 +84,9 @@ class OptimisationResult:
         "local" or "global".
     wall_time : float
         s.
+    first_feasible : tuple of (int, float) or None
+        Evaluations spent and s elapsed when the first feasible K came
+        back (the rest of the budget only improves d), None if none did.
     history : list of Evaluation
         Every evaluation, in the order run.
     """
@@ -101,6 +104,7 @@ class OptimisationResult:
     nstarts: int
     method: str
     wall_time: float
+    first_feasible: tuple | None = None
     history: list = field(default_factory=list, repr=False)
 
     @property
@@ -346,4 +350,5 @@ class _Search:
             k=best.k, c=best.c, best=best, initial=getattr(self, "initial", None),
             problem=self.problem, success=feasible, status=status, message=message,
             nfev=self.evaluator.nfev, nit=self.nit, nstarts=self.nstarts, method=method,
-            wall_time=wall_time, history=list(self.evaluator.history))
+            wall_time=wall_time, first_feasible=self.evaluator.first_feasible,
+            history=list(self.evaluator.history))

@@ -531,17 +531,13 @@ def _crba(P, R, p, S):
     """Angular inertias J (n, 3, 3) of the bodies (see above) and the mass matrix (n, n)."""
     n = P.n
     Jb = np.empty((n, 3, 3))
-    # composite bodies: J, h, m
-    Jc = np.empty((n, 3, 3))
     hc = np.empty((n, 3))
-    mc = np.empty(n)
     for i in range(n):
         _angular_inertia(P, R, p, i, Jb)
-        for r in range(3):
-            for q in range(3):
-                Jc[i, r, q] = Jb[i, r, q]
         _put(hc, i, _scale(_get(p, i), P.mass[i]))
-        mc[i] = P.mass[i]
+    # composite bodies (Jc, hc, mc), accumulated leaves first
+    Jc = Jb.copy()
+    mc = P.mass.copy()
     for i in range(n - 1, -1, -1):
         a = P.parent[i]
         if a < n:

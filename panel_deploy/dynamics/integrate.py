@@ -87,13 +87,13 @@ def first_switch(n, y0, y1, h, tol):
     (e.g. locked by the loop at the singular stowed state) crosses it at
     round-off amplitude on every step.
     """
-    m0 = _modes(y0[:n])
-    m1 = _modes(y1[:n])
     best = 2.0
     for i in range(n):
-        if m0[i] == m1[i]:
+        m0 = kernels.contact_mode(y0[i])
+        m1 = kernels.contact_mode(y1[i])
+        if m0 == m1:
             continue
-        b = _boundary(m0[i], m1[i])
+        b = _boundary(m0, m1)
         g0 = y0[i] - b
         if max(abs(g0), abs(y1[i] - b)) <= tol:
             continue
@@ -114,11 +114,12 @@ def max_gap(P, y):
     """Largest loop-closure gap at state y, m."""
     n = P.n
     R, p, w, vo, S = kernels.kinematics(P, y[:n], y[n:2 * n])
-    pts, gap, rate = kernels.cut_geometry(P, R, p, w, vo)
     out = 0.0
-    for j in range(gap.shape[0]):
-        for e in range(2):
-            out = max(out, math.sqrt(kernels._dot(gap[j, e], gap[j, e])))
+    for j in range(P.cut_a.shape[0]):
+        Ma, Na, Mb, Nb = kernels._cut_ends(P, j, R, p)
+        dM, dN = kernels._sub(Mb, Ma), kernels._sub(Nb, Na)
+        out = max(out, math.sqrt(kernels._dot(dM, dM)))
+        out = max(out, math.sqrt(kernels._dot(dN, dN)))
     return out
 
 
@@ -149,19 +150,29 @@ def _rms_norm(e, y0, y1, rtol, atol):
 @njit(cache=True)
 def _dopri5_step(P, y, f, h, K):
     """One Dormand-Prince step of length h; returns (y1, err) and leaves rhs(y1) in K[6]."""
+    N = y.shape[0]
     K[0] = f
+    yi = np.empty(N)
     for st in range(1, 6):
-        yi = y.copy()
-        for q in range(st):
-            yi += h * _A[st, q] * K[q]
+        for i in range(N):
+            s = y[i]
+            for q in range(st):
+                s += h * _A[st, q] * K[q, i]
+            yi[i] = s
         K[st] = kernels.rhs(P, yi)
-    y1 = y.copy()
-    for q in range(6):
-        y1 += h * _B[q] * K[q]
+    y1 = np.empty(N)
+    for i in range(N):
+        s = y[i]
+        for q in range(6):
+            s += h * _B[q] * K[q, i]
+        y1[i] = s
     K[6] = kernels.rhs(P, y1)
-    err = np.zeros(y.shape[0])
-    for q in range(7):
-        err += h * _E[q] * K[q]
+    err = np.empty(N)
+    for i in range(N):
+        s = 0.0
+        for q in range(7):
+            s += h * _E[q] * K[q, i]
+        err[i] = s
     return y1, err
 
 

@@ -36,6 +36,8 @@ from numba import njit
 from .pack import EXACT, PENALTY, TREE
 
 PI = math.pi
+#: The zero 3-vector, for wrenches without a torque or a force.
+ZERO3 = (0.0, 0.0, 0.0)
 
 
 @njit(cache=True)
@@ -62,10 +64,15 @@ def contact_mode(theta):
     return 0 if theta < 0.0 else (2 if theta > PI else 1)
 
 
+# --- small vectors ---
+# 3-vectors travel as tuples, which numba keeps in registers: an array
+# temporary costs a heap allocation, which dominated the kernels' run time.
+
 @njit(cache=True)
 def _dot(a, b):
+    """a . b for 1-d arrays or tuples of equal length."""
     s = 0.0
-    for i in range(a.shape[0]):
+    for i in range(len(a)):
         s += a[i] * b[i]
     return s
 
@@ -83,17 +90,8 @@ def _mv(A, x):
 
 
 @njit(cache=True)
-def _vm(x, A):
-    """x @ A for small arrays."""
-    out = np.zeros(A.shape[1])
-    for i in range(A.shape[0]):
-        for j in range(A.shape[1]):
-            out[j] += x[i] * A[i, j]
-    return out
-
-
-@njit(cache=True)
-def _mm(A, B):
+def _matmul(A, B):
+    """A @ B for small arrays, each entry summed in index order."""
     out = np.zeros((A.shape[0], B.shape[1]))
     for i in range(A.shape[0]):
         for k in range(A.shape[1]):
@@ -104,27 +102,68 @@ def _mm(A, B):
 
 
 @njit(cache=True)
+def _get(A, i, o=0):
+    """``A[i, o:o + 3]`` as a tuple."""
+    return (A[i, o], A[i, o + 1], A[i, o + 2])
+
+
+@njit(cache=True)
+def _put(A, i, v, o=0):
+    """``A[i, o:o + 3] = v``."""
+    A[i, o] = v[0]
+    A[i, o + 1] = v[1]
+    A[i, o + 2] = v[2]
+
+
+@njit(cache=True)
+def _add(a, b):
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+
+
+@njit(cache=True)
+def _sub(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@njit(cache=True)
+def _scale(a, s):
+    return (a[0] * s, a[1] * s, a[2] * s)
+
+
+@njit(cache=True)
 def _cross(a, b):
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@njit(cache=True)
+def _rotate(R, b, x):
+    """``R[b] @ x`` for orientations R (k, 3, 3) and a 3-vector x."""
+    return (R[b, 0, 0] * x[0] + R[b, 0, 1] * x[1] + R[b, 0, 2] * x[2],
+            R[b, 1, 0] * x[0] + R[b, 1, 1] * x[1] + R[b, 1, 2] * x[2],
+            R[b, 2, 0] * x[0] + R[b, 2, 1] * x[1] + R[b, 2, 2] * x[2])
 
 
 @njit(cache=True)
 def _rotation(axis, angle):
+    """Rows of the rotation by ``angle`` (rad) about the unit ``axis`` (Rodrigues)."""
     x, y, z = axis[0], axis[1], axis[2]
     c, s = math.cos(angle), math.sin(angle)
     C = 1.0 - c
-    out = np.empty((3, 3))
-    out[0, 0] = c + x * x * C
-    out[0, 1] = x * y * C - z * s
-    out[0, 2] = x * z * C + y * s
-    out[1, 0] = y * x * C + z * s
-    out[1, 1] = c + y * y * C
-    out[1, 2] = y * z * C - x * s
-    out[2, 0] = z * x * C - y * s
-    out[2, 1] = z * y * C + x * s
-    out[2, 2] = c + z * z * C
-    return out
+    return ((c + x * x * C, x * y * C - z * s, x * z * C + y * s),
+            (y * x * C + z * s, c + y * y * C, y * z * C - x * s),
+            (z * x * C - y * s, z * y * C + x * s, c + z * z * C))
+
+
+@njit(cache=True)
+def _carried(P, R, p, b, x):
+    """Current position (m) of body b's material point that sits at x in the flat state."""
+    return _add(_get(p, b), _rotate(R, b, _sub(x, _get(P.r0, b))))
+
+
+@njit(cache=True)
+def _point_velocity(w, vo, b, x):
+    """Velocity (m/s) of body b's material point at x."""
+    return _add(_get(vo, b), _cross(_get(w, b), x))
 
 
 @njit(cache=True)
@@ -141,79 +180,132 @@ def kinematics(P, theta, omega):
     S : (n, 6)          joint screws (axis, hinge point x axis)
     """
     n = P.n
-    R = np.empty((n + 1, 3, 3))
+    R = np.zeros((n + 1, 3, 3))
     p = np.empty((n + 1, 3))
     w = np.zeros((n + 1, 3))
     vo = np.zeros((n + 1, 3))
     S = np.empty((n, 6))
-    R[n] = np.eye(3)
-    p[n] = P.r0[n]
+    for r in range(3):
+        R[n, r, r] = 1.0
+    _put(p, n, _get(P.r0, n))
     for i in range(n):
         a = P.parent[i]
-        Ra = R[a]
-        R[i] = _mm(Ra, _rotation(P.axis[i], theta[i]))
-        h = p[a] + _mv(Ra, P.point[i] - P.r0[a])
-        u = _mv(Ra, P.axis[i])
-        p[i] = h + _mv(R[i], P.r0[i] - P.point[i])
-        S[i, :3] = u
-        S[i, 3:] = _cross(h, u)
-        w[i] = w[a] + u * omega[i]
-        vo[i] = vo[a] + S[i, 3:] * omega[i]
+        rot = _rotation(_get(P.axis, i), theta[i])
+        for r in range(3):
+            x0, x1, x2 = R[a, r, 0], R[a, r, 1], R[a, r, 2]
+            for c in range(3):
+                R[i, r, c] = x0 * rot[0][c] + x1 * rot[1][c] + x2 * rot[2][c]
+        h = _carried(P, R, p, a, _get(P.point, i))
+        u = _rotate(R, a, _get(P.axis, i))
+        _put(p, i, _add(h, _rotate(R, i, _sub(_get(P.r0, i), _get(P.point, i)))))
+        hu = _cross(h, u)
+        _put(S, i, u)
+        _put(S, i, hu, 3)
+        _put(w, i, _add(_get(w, a), _scale(u, omega[i])))
+        _put(vo, i, _add(_get(vo, a), _scale(hu, omega[i])))
     return R, p, w, vo, S
 
 
+# --- spatial inertia ---
+# About the ground origin a body of mass m, centroid c, is [[J, [h]x],
+# [-[h]x, m 1]] with J = R I R^T - m [c]x^2 and h = m c; a composite body is
+# the sum, so (J, h, m) describe both without 6 x 6 matrices.
+
 @njit(cache=True)
-def _spatial_inertia(m, Ic, c):
-    """6x6 spatial inertia about the ground origin of a body of mass m, centroid c."""
-    C = np.array([[0.0, -c[2], c[1]], [c[2], 0.0, -c[0]], [-c[1], c[0], 0.0]])
-    out = np.empty((6, 6))
-    out[:3, :3] = Ic - m * _mm(C, C)
-    out[:3, 3:] = m * C
-    out[3:, :3] = -m * C
-    out[3:, 3:] = m * np.eye(3)
-    return out
+def _angular_inertia(P, R, p, i, out):
+    """Write J of body i (kg m^2, see above) to out[i] (k, 3, 3)."""
+    m = P.mass[i]
+    c = _get(p, i)
+    # diagonal of [c]x^2 (off it, c_r c_q)
+    d = (-c[2] * c[2] - c[1] * c[1], -c[2] * c[2] - c[0] * c[0], -c[1] * c[1] - c[0] * c[0])
+    I = P.inertia[i]
+    for r in range(3):
+        t0 = R[i, r, 0] * I[0, 0] + R[i, r, 1] * I[1, 0] + R[i, r, 2] * I[2, 0]
+        t1 = R[i, r, 0] * I[0, 1] + R[i, r, 1] * I[1, 1] + R[i, r, 2] * I[2, 1]
+        t2 = R[i, r, 0] * I[0, 2] + R[i, r, 1] * I[1, 2] + R[i, r, 2] * I[2, 2]
+        for q in range(3):
+            cc = d[r] if r == q else c[r] * c[q]
+            out[i, r, q] = (t0 * R[i, q, 0] + t1 * R[i, q, 1] + t2 * R[i, q, 2]) - m * cc
 
 
 @njit(cache=True)
-def _point_jacobian(P, S, b, x, out, sign):
-    """Add ``sign`` times d(velocity of body b's material point at x)/d omega to out (3, n)."""
+def _inertia_times(J, i, h, m, xw, xv):
+    """Spatial inertia (J[i], h, m) times the spatial vector (xw, xv): (angular, linear)."""
+    h0, h1, h2 = h[0], h[1], h[2]
+    fw = (J[i, 0, 0] * xw[0] + J[i, 0, 1] * xw[1] + J[i, 0, 2] * xw[2] - h2 * xv[1] + h1 * xv[2],
+          J[i, 1, 0] * xw[0] + J[i, 1, 1] * xw[1] + J[i, 1, 2] * xw[2] + h2 * xv[0] - h0 * xv[2],
+          J[i, 2, 0] * xw[0] + J[i, 2, 1] * xw[1] + J[i, 2, 2] * xw[2] - h1 * xv[0] + h0 * xv[1])
+    fv = (h2 * xw[1] - h1 * xw[2] + m * xv[0],
+          -h2 * xw[0] + h0 * xw[2] + m * xv[1],
+          h1 * xw[0] - h0 * xw[1] + m * xv[2])
+    return fw, fv
+
+
+@njit(cache=True)
+def _dot6(A, i, fw, fv):
+    """``A[i, :6] . (fw, fv)``, summed in index order."""
+    return (A[i, 0] * fw[0] + A[i, 1] * fw[1] + A[i, 2] * fw[2]
+            + A[i, 3] * fv[0] + A[i, 4] * fv[1] + A[i, 5] * fv[2])
+
+
+@njit(cache=True)
+def _point_jacobian(P, S, b, x, out, row, sign):
+    """Add ``sign`` times d(velocity of body b's material point at x)/d omega
+    to out[row:row + 3] (k, n)."""
     while b < P.n:
-        out[:, b] += sign * (S[b, 3:] + _cross(S[b, :3], x))
+        v = _add(_get(S, b, 3), _cross(_get(S, b), x))
+        for k in range(3):
+            out[row + k, b] += sign * v[k]
         b = P.parent[b]
 
 
 @njit(cache=True)
-def _angular_jacobian(P, S, b, out, sign):
+def _angular_jacobian(P, S, b, out, row, sign):
+    """Add ``sign`` times d(angular velocity of body b)/d omega to out[row:row + 3] (k, n)."""
     while b < P.n:
-        out[:, b] += sign * S[b, :3]
+        for k in range(3):
+            out[row + k, b] += sign * S[b, k]
         b = P.parent[b]
 
 
 @njit(cache=True)
-def _point_bias_acceleration(a6, w, vo, x):
-    """Acceleration of a material point at x when qdd = 0 (velocity products only)."""
-    return a6[3:] + _cross(a6[:3], x) + _cross(w, vo + _cross(w, x))
+def _point_bias_acceleration(acc, w, vo, b, x):
+    """Acceleration of body b's material point at x when qdd = 0 (velocity products only)."""
+    wb = _get(w, b)
+    return _add(_add(_get(acc, b, 3), _cross(_get(acc, b), x)),
+                _cross(wb, _add(_get(vo, b), _cross(wb, x))))
 
 
 @njit(cache=True)
 def _cut_angle(P, j, R):
-    """Cut-hinge angle (rad, continuous on (-pi/2, 3pi/2]) and its exact rate axis g.
+    """Cut-hinge angle (rad, continuous on (-pi/2, 3pi/2]) and its exact rate axis g (3-tuple).
 
     theta = atan2(e2 . f, e1 . f) with f = R_b e1 and e1, e2 carried by body a;
     d theta / dt = g . (w_b - w_a) for any relative orientation (not only a pure
     rotation about the axis), so torque and energy stay consistent.
     """
     a, b = P.cut_a[j], P.cut_b[j]
-    f = _mv(R[b], P.cut_e1[j])
-    e1 = _mv(R[a], P.cut_e1[j])
-    e2 = _mv(R[a], P.cut_e2[j])
+    f = _rotate(R, b, _get(P.cut_e1, j))
+    e1 = _rotate(R, a, _get(P.cut_e1, j))
+    e2 = _rotate(R, a, _get(P.cut_e2, j))
     x = _dot(e1, f)
     y = _dot(e2, f)
     theta = math.atan2(y, x)
     if theta < -0.5 * PI:
         theta += 2.0 * PI
-    g = _cross(f, x * e2 - y * e1) / (x * x + y * y)
-    return theta, g
+    d = x * x + y * y
+    g = _cross(f, _sub(_scale(e2, x), _scale(e1, y)))
+    return theta, (g[0] / d, g[1] / d, g[2] / d)
+
+
+@njit(cache=True)
+def _cut_ends(P, j, R, p):
+    """Ends (M_a, N_a, M_b, N_b) of cut hinge j as carried by its bodies a and b, m."""
+    M = _get(P.cut_point, j)
+    N = _add(M, _scale(_get(P.cut_axis, j), P.cut_length[j]))
+    a, b = P.cut_a[j], P.cut_b[j]
+    return (_carried(P, R, p, a, M), _carried(P, R, p, a, N),
+            _carried(P, R, p, b, M), _carried(P, R, p, b, N))
 
 
 @njit(cache=True)
@@ -228,25 +320,27 @@ def cut_geometry(P, R, p, w, vo):
     gap = np.empty((m, 2, 3))
     rate = np.empty((m, 2, 3))
     for j in range(m):
-        for s in range(2):
-            body = P.cut_a[j] if s == 0 else P.cut_b[j]
-            for e in range(2):
-                end = P.cut_point[j] + e * P.cut_length[j] * P.cut_axis[j]
-                x = p[body] + _mv(R[body], end - P.r0[body])
-                pts[j, 2 * s + e] = x
+        a, b = P.cut_a[j], P.cut_b[j]
+        ends = _cut_ends(P, j, R, p)
         for e in range(2):
-            gap[j, e] = pts[j, 2 + e] - pts[j, e]
-            a, b = P.cut_a[j], P.cut_b[j]
-            xa, xb = pts[j, e], pts[j, 2 + e]
-            rate[j, e] = (vo[b] + _cross(w[b], xb)) - (vo[a] + _cross(w[a], xa))
+            xa, xb = ends[e], ends[2 + e]
+            d = _sub(xb, xa)
+            v = _sub(_point_velocity(w, vo, b, xb), _point_velocity(w, vo, a, xa))
+            for k in range(3):
+                pts[j, e, k] = xa[k]
+                pts[j, 2 + e, k] = xb[k]
+                gap[j, e, k] = d[k]
+                rate[j, e, k] = v[k]
     return pts, gap, rate
 
 
 @njit(cache=True)
 def _add_wrench(F, body, torque, force, point):
     """Add a force applied at ``point`` plus a torque to body's wrench about the origin."""
-    F[body, :3] += torque + _cross(point, force)
-    F[body, 3:] += force
+    t = _add(torque, _cross(point, force))
+    for k in range(3):
+        F[body, k] += t[k]
+        F[body, 3 + k] += force[k]
 
 
 @njit(cache=True)
@@ -269,34 +363,35 @@ def cut_forces(P, R, p, w, vo):
     F = np.zeros((n + 1, 6))
     energy = 0.0
     power = 0.0
-    pts, gap, rate = cut_geometry(P, R, p, w, vo)
-    zero = np.zeros(3)
     for j in range(P.cut_a.shape[0]):
         a, b = P.cut_a[j], P.cut_b[j]
         theta, g = _cut_angle(P, j, R)
-        omega = _dot(g, w[b] - w[a])
+        omega = _dot(g, _sub(_get(w, b), _get(w, a)))
         tau, e, pw = hinge_law(theta, omega, P.cut_k[j], P.cut_c[j], P.k_s, P.c_s)
         energy += e
         power += pw
-        _add_wrench(F, b, tau * g, zero, zero)
-        _add_wrench(F, a, -tau * g, zero, zero)
+        _add_wrench(F, b, _scale(g, tau), ZERO3, ZERO3)
+        _add_wrench(F, a, _scale(g, -tau), ZERO3, ZERO3)
         if P.method != PENALTY:
             continue
-        dM, vM = gap[j, 0], rate[j, 0]
-        fM = -P.k_M * dM - P.c_M * vM
+        Ma, Na, Mb, Nb = _cut_ends(P, j, R, p)
+        dM = _sub(Mb, Ma)
+        vM = _sub(_point_velocity(w, vo, b, Mb), _point_velocity(w, vo, a, Ma))
+        fM = _sub(_scale(dM, -P.k_M), _scale(vM, P.c_M))
         energy += 0.5 * P.k_M * _dot(dM, dM)
         power += P.c_M * _dot(vM, vM)
-        _add_wrench(F, b, zero, fM, pts[j, 2])
-        _add_wrench(F, a, zero, -fM, pts[j, 0])
-        u = _mv(R[a], P.cut_axis[j])
-        dN, vN = gap[j, 1], rate[j, 1]
-        dNp = dN - u * _dot(u, dN)
-        vNp = vN - u * _dot(u, vN)
-        fN = -P.k_N * dNp - P.c_N * vNp
+        _add_wrench(F, b, ZERO3, fM, Mb)
+        _add_wrench(F, a, ZERO3, _scale(fM, -1.0), Ma)
+        u = _rotate(R, a, _get(P.cut_axis, j))
+        dN = _sub(Nb, Na)
+        vN = _sub(_point_velocity(w, vo, b, Nb), _point_velocity(w, vo, a, Na))
+        dNp = _sub(dN, _scale(u, _dot(u, dN)))
+        vNp = _sub(vN, _scale(u, _dot(u, vN)))
+        fN = _sub(_scale(dNp, -P.k_N), _scale(vNp, P.c_N))
         energy += 0.5 * P.k_N * _dot(dNp, dNp)
         power += P.c_N * _dot(vNp, vNp)
-        _add_wrench(F, b, zero, fN, pts[j, 3])
-        _add_wrench(F, a, P.k_N * _dot(u, dN) * _cross(u, dN), -fN, pts[j, 1])
+        _add_wrench(F, b, ZERO3, fN, Nb)
+        _add_wrench(F, a, _scale(_cross(u, dN), P.k_N * _dot(u, dN)), _scale(fN, -1.0), Na)
     return F, energy, power
 
 
@@ -323,34 +418,43 @@ def closure_jacobian(P, R, p, w, vo, S, acc):
     c = np.empty(5 * m)
     J = np.zeros((5 * m, n))
     gamma = np.zeros(5 * m)
-    pts, gap, rate = cut_geometry(P, R, p, w, vo)
+    # rows 0-2: d(N_b - N_a)/d omega, rows 3-5: d(w_a)/d omega, of one cut
+    work = np.empty((6, n))
     with_gamma = acc.shape[0] > 0
     for j in range(m):
         a, b = P.cut_a[j], P.cut_b[j]
         r = 5 * j
-        c[r:r + 3] = gap[j, 0]
-        JM = np.zeros((3, n))
-        _point_jacobian(P, S, b, pts[j, 2], JM, 1.0)
-        _point_jacobian(P, S, a, pts[j, 0], JM, -1.0)
-        J[r:r + 3] = JM
-        JN = np.zeros((3, n))
-        _point_jacobian(P, S, b, pts[j, 3], JN, 1.0)
-        _point_jacobian(P, S, a, pts[j, 1], JN, -1.0)
-        Jw = np.zeros((3, n))
-        _angular_jacobian(P, S, a, Jw, 1.0)
-        dN, vN = gap[j, 1], rate[j, 1]
+        Ma, Na, Mb, Nb = _cut_ends(P, j, R, p)
+        dM = _sub(Mb, Ma)
+        for k in range(3):
+            c[r + k] = dM[k]
+        _point_jacobian(P, S, b, Mb, J, r, 1.0)
+        _point_jacobian(P, S, a, Ma, J, r, -1.0)
+        work[:] = 0.0
+        _point_jacobian(P, S, b, Nb, work, 0, 1.0)
+        _point_jacobian(P, S, a, Na, work, 0, -1.0)
+        _angular_jacobian(P, S, a, work, 3, 1.0)
+        dN = _sub(Nb, Na)
+        vN = _sub(_point_velocity(w, vo, b, Nb), _point_velocity(w, vo, a, Na))
         if with_gamma:
-            gamma[r:r + 3] = (_point_bias_acceleration(acc[b], w[b], vo[b], pts[j, 2])
-                              - _point_bias_acceleration(acc[a], w[a], vo[a], pts[j, 0]))
-            aN = (_point_bias_acceleration(acc[b], w[b], vo[b], pts[j, 3])
-                  - _point_bias_acceleration(acc[a], w[a], vo[a], pts[j, 1]))
+            gM = _sub(_point_bias_acceleration(acc, w, vo, b, Mb),
+                      _point_bias_acceleration(acc, w, vo, a, Ma))
+            for k in range(3):
+                gamma[r + k] = gM[k]
+            aN = _sub(_point_bias_acceleration(acc, w, vo, b, Nb),
+                      _point_bias_acceleration(acc, w, vo, a, Na))
         for k in range(2):
-            e = _mv(R[a], P.cut_e1[j] if k == 0 else P.cut_e2[j])
+            e = _rotate(R, a, _get(P.cut_e1 if k == 0 else P.cut_e2, j))
             c[r + 3 + k] = _dot(e, dN)
-            J[r + 3 + k] = _vm(e, JN) + _vm(_cross(e, dN), Jw)
+            t = _cross(e, dN)
+            for col in range(n):
+                JN = e[0] * work[0, col] + e[1] * work[1, col] + e[2] * work[2, col]
+                Jw = t[0] * work[3, col] + t[1] * work[4, col] + t[2] * work[5, col]
+                J[r + 3 + k, col] = JN + Jw
             if with_gamma:
-                edot = _cross(w[a], e)
-                eddot = _cross(acc[a, :3], e) + _cross(w[a], edot)
+                wa = _get(w, a)
+                edot = _cross(wa, e)
+                eddot = _add(_cross(_get(acc, a), e), _cross(wa, edot))
                 gamma[r + 3 + k] = _dot(e, aN) + 2.0 * _dot(edot, vN) + _dot(eddot, dN)
     return c, J, gamma
 
@@ -375,18 +479,29 @@ def _cholesky(A):
 
 
 @njit(cache=True)
-def _cholesky_solve(L, b):
-    n = L.shape[0]
-    x = b.copy()
+def _cholesky_solve(L, X):
+    """Overwrite X (n, k) with the solution of ``L L^T X = X``.
+
+    The innermost loop runs over the k right-hand sides, which are independent:
+    one column at a time, every operation waits on the one before.
+    """
+    n, m = X.shape
     for i in range(n):
         for k in range(i):
-            x[i] -= L[i, k] * x[k]
-        x[i] /= L[i, i]
+            l = L[i, k]
+            for c in range(m):
+                X[i, c] -= l * X[k, c]
+        d = L[i, i]
+        for c in range(m):
+            X[i, c] /= d
     for i in range(n - 1, -1, -1):
         for k in range(i + 1, n):
-            x[i] -= L[k, i] * x[k]
-        x[i] /= L[i, i]
-    return x
+            l = L[k, i]
+            for c in range(m):
+                X[i, c] -= l * X[k, c]
+        d = L[i, i]
+        for c in range(m):
+            X[i, c] /= d
 
 
 @njit(cache=True)
@@ -398,11 +513,10 @@ def _constraint_factor(L, J, regularisation):
     of the closure Jacobian (the stowed and flat-aligned singular states).
     Returns ``(Y, LA, ok)``.
     """
-    n, mc = L.shape[0], J.shape[0]
-    Y = np.empty((n, mc))
-    for r in range(mc):
-        Y[:, r] = _cholesky_solve(L, J[r].copy())
-    A = _mm(J, Y)
+    mc = J.shape[0]
+    Y = J.T.copy()
+    _cholesky_solve(L, Y)
+    A = _matmul(J, Y)
     scale = 0.0
     for r in range(mc):
         scale = max(scale, A[r, r])
@@ -414,25 +528,33 @@ def _constraint_factor(L, J, regularisation):
 
 @njit(cache=True)
 def _crba(P, R, p, S):
-    """Spatial inertias (n, 6, 6) about the ground origin and the mass matrix (n, n)."""
+    """Angular inertias J (n, 3, 3) of the bodies (see above) and the mass matrix (n, n)."""
     n = P.n
-    I6 = np.empty((n, 6, 6))
+    Jb = np.empty((n, 3, 3))
+    hc = np.empty((n, 3))
     for i in range(n):
-        Ic = _mm(_mm(R[i], P.inertia[i]), R[i].T)
-        I6[i] = _spatial_inertia(P.mass[i], Ic, p[i])
-    comp = I6.copy()
+        _angular_inertia(P, R, p, i, Jb)
+        _put(hc, i, _scale(_get(p, i), P.mass[i]))
+    # composite bodies (Jc, hc, mc), accumulated leaves first
+    Jc = Jb.copy()
+    mc = P.mass.copy()
     for i in range(n - 1, -1, -1):
-        if P.parent[i] < n:
-            comp[P.parent[i]] += comp[i]
+        a = P.parent[i]
+        if a < n:
+            for r in range(3):
+                for q in range(3):
+                    Jc[a, r, q] += Jc[i, r, q]
+            _put(hc, a, _add(_get(hc, a), _get(hc, i)))
+            mc[a] += mc[i]
     M = np.zeros((n, n))
     for i in range(n):
-        Fi = _mv(comp[i], S[i])
-        M[i, i] = _dot(S[i], Fi)
+        Fw, Fv = _inertia_times(Jc, i, _get(hc, i), mc[i], _get(S, i), _get(S, i, 3))
+        M[i, i] = _dot6(S, i, Fw, Fv)
         j = P.parent[i]
         while j < n:
-            M[i, j] = M[j, i] = _dot(S[j], Fi)
+            M[i, j] = M[j, i] = _dot6(S, j, Fw, Fv)
             j = P.parent[j]
-    return I6, M
+    return Jb, M
 
 
 @njit(cache=True)
@@ -449,42 +571,49 @@ def mass_and_bias(P, theta, omega):
     """
     n = P.n
     R, p, w, vo, S = kinematics(P, theta, omega)
-    I6, M = _crba(P, R, p, S)
+    Jb, M = _crba(P, R, p, S)
     if P.method != TREE:
         f, spring, dissipation = cut_forces(P, R, p, w, vo)
-        f = -f
+        for i in range(n + 1):
+            for k in range(6):
+                f[i, k] = -f[i, k]
     else:
         f = np.zeros((n + 1, 6))
         spring = 0.0
         dissipation = 0.0
     acc = np.zeros((n + 1, 6))
     gravity_energy = 0.0
-    V = np.empty(6)
     for i in range(n):
         a = P.parent[i]
-        s = S[i]
-        acc[i, :3] = acc[a, :3] + _cross(w[a], s[:3]) * omega[i]
-        acc[i, 3:] = acc[a, 3:] + (_cross(w[a], s[3:]) + _cross(vo[a], s[:3])) * omega[i]
-        V[:3] = w[i]
-        V[3:] = vo[i]
-        h = _mv(I6[i], V)
-        fi = _mv(I6[i], acc[i])
-        fi[:3] += _cross(w[i], h[:3]) + _cross(vo[i], h[3:])
-        fi[3:] += _cross(w[i], h[3:])
+        sw, sv = _get(S, i), _get(S, i, 3)
+        wa = _get(w, a)
+        _put(acc, i, _add(_get(acc, a), _scale(_cross(wa, sw), omega[i])))
+        _put(acc, i, _add(_get(acc, a, 3),
+                          _scale(_add(_cross(wa, sv), _cross(_get(vo, a), sw)), omega[i])), 3)
+        m = P.mass[i]
+        pi, wi, voi = _get(p, i), _get(w, i), _get(vo, i)
+        hb = _scale(pi, m)
+        hw, hv = _inertia_times(Jb, i, hb, m, wi, voi)
+        fw, fv = _inertia_times(Jb, i, hb, m, _get(acc, i), _get(acc, i, 3))
+        fw = _add(fw, _add(_cross(wi, hw), _cross(voi, hv)))
+        fv = _add(fv, _cross(wi, hv))
         if P.has_gravity:
-            fg = P.mass[i] * P.gravity
-            fi[:3] -= _cross(p[i], fg)
-            fi[3:] -= fg
-            gravity_energy -= _dot(fg, p[i] - P.r0[i])
-        f[i] += fi
+            fg = _scale((P.gravity[0], P.gravity[1], P.gravity[2]), m)
+            fw = _sub(fw, _cross(pi, fg))
+            fv = _sub(fv, fg)
+            gravity_energy -= _dot(fg, _sub(pi, _get(P.r0, i)))
+        _put(f, i, _add(_get(f, i), fw))
+        _put(f, i, _add(_get(f, i, 3), fv), 3)
     Q = np.empty(n)
     for i in range(n - 1, -1, -1):
         tau, e, pw = hinge_law(theta[i], omega[i], P.k[i], P.c[i], P.k_s, P.c_s)
         spring += e
         dissipation += pw
-        Q[i] = tau - _dot(S[i], f[i])
-        if P.parent[i] < n:
-            f[P.parent[i]] += f[i]
+        Q[i] = tau - _dot6(S, i, _get(f, i), _get(f, i, 3))
+        a = P.parent[i]
+        if a < n:
+            for k in range(6):
+                f[a, k] += f[i, k]
     return M, Q, (R, p, w, vo, S), acc, spring, dissipation, gravity_energy
 
 
@@ -494,7 +623,7 @@ def rhs(P, y):
     n = P.n
     theta = y[:n]
     omega = y[n:2 * n]
-    M, Q, kin, acc, spring, dissipation, _ = mass_and_bias(P, theta, omega)
+    M, qdd, kin, acc, spring, dissipation, _ = mass_and_bias(P, theta, omega)
     dy = np.empty(2 * n + 2)
     dy[:n] = omega
     dy[2 * n] = dissipation
@@ -503,19 +632,28 @@ def rhs(P, y):
     if not ok:
         dy[:] = np.nan
         return dy
-    qdd = _cholesky_solve(L, Q)
+    _cholesky_solve(L, qdd.reshape((n, 1)))
     if P.method == EXACT:
         R, p, w, vo, S = kin
         c, J, gamma = closure_jacobian(P, R, p, w, vo, S, acc)
-        cdot = _mv(J, omega)
-        T = P.baumgarte
-        target = -gamma - (2.0 / T) * cdot - c / (T * T)
         Y, LA, ok = _constraint_factor(L, J, P.regularisation)
         if not ok:
             dy[:] = np.nan
             return dy
-        lam = _cholesky_solve(LA, target - _mv(J, qdd))
-        qdd = qdd + _mv(Y, lam)
+        T = P.baumgarte
+        cdot = _mv(J, omega)
+        lam = np.empty(J.shape[0])
+        for r in range(J.shape[0]):
+            s = 0.0
+            for k in range(n):
+                s += J[r, k] * qdd[k]
+            lam[r] = (-gamma[r] - (2.0 / T) * cdot[r] - c[r] / (T * T)) - s
+        _cholesky_solve(LA, lam.reshape((lam.shape[0], 1)))
+        for i in range(n):
+            s = 0.0
+            for r in range(J.shape[0]):
+                s += Y[i, r] * lam[r]
+            qdd[i] += s
         dy[2 * n + 1] = _dot(lam, cdot)
     dy[n:2 * n] = qdd
     return dy
@@ -603,12 +741,15 @@ def stiff_jacobian(P, y):
         contact = contact_mode(theta[i]) != 1
         Kq[i, i] = P.k[i] + (P.k_s if contact else 0.0)
         Cq[i, i] = P.c[i] + (P.c_s if contact else 0.0)
+    Jw = np.empty((3, n))
+    G = np.empty(n)
     for j in range(P.cut_a.shape[0]):
         th, g = _cut_angle(P, j, R)
-        Jw = np.zeros((3, n))
-        _angular_jacobian(P, S, P.cut_b[j], Jw, 1.0)
-        _angular_jacobian(P, S, P.cut_a[j], Jw, -1.0)
-        G = _vm(g, Jw)
+        Jw[:] = 0.0
+        _angular_jacobian(P, S, P.cut_b[j], Jw, 0, 1.0)
+        _angular_jacobian(P, S, P.cut_a[j], Jw, 0, -1.0)
+        for col in range(n):
+            G[col] = g[0] * Jw[0, col] + g[1] * Jw[1, col] + g[2] * Jw[2, col]
         contact = contact_mode(th) != 1
         _outer_add(Kq, P.cut_k[j] + (P.k_s if contact else 0.0), G)
         _outer_add(Cq, P.cut_c[j] + (P.c_s if contact else 0.0), G)
@@ -626,18 +767,28 @@ def stiff_jacobian(P, y):
     B = np.zeros((n, n))
     if not ok:
         return A, B, False
-    for col in range(n):
-        A[:, col] = -_cholesky_solve(L, Kq[:, col].copy())
-        B[:, col] = -_cholesky_solve(L, Cq[:, col].copy())
+    A[:] = Kq
+    B[:] = Cq
+    _cholesky_solve(L, A)
+    _cholesky_solve(L, B)
+    for i in range(n):
+        for col in range(n):
+            A[i, col] = -A[i, col]
+            B[i, col] = -B[i, col]
     if P.method == EXACT:
         Y, LA, ok = _constraint_factor(L, J, P.regularisation)
         if not ok:
             return A, B, False
         T = P.baumgarte
-        for col in range(n):
-            # lambda's response to a unit change of theta[col] / omega[col]
-            ra = -_mv(J, A[:, col]) - J[:, col] / (T * T)
-            rb = -_mv(J, B[:, col]) - J[:, col] * (2.0 / T)
-            A[:, col] += _mv(Y, _cholesky_solve(LA, ra))
-            B[:, col] += _mv(Y, _cholesky_solve(LA, rb))
+        # lambda's response to a unit change of theta[col] / omega[col]
+        Ra = _matmul(J, A)
+        Rb = _matmul(J, B)
+        for r in range(J.shape[0]):
+            for col in range(n):
+                Ra[r, col] = -Ra[r, col] - J[r, col] / (T * T)
+                Rb[r, col] = -Rb[r, col] - J[r, col] * (2.0 / T)
+        _cholesky_solve(LA, Ra)
+        _cholesky_solve(LA, Rb)
+        A += _matmul(Y, Ra)
+        B += _matmul(Y, Rb)
     return A, B, True

@@ -82,9 +82,9 @@ def lu_factor(S):
 
 
 @njit(cache=True)
-def lu_solve(LU, piv, b):
+def lu_solve(LU, piv, b, x):
+    """Write to x (n,) the solution of ``S x = b`` from lu_factor's (LU, piv); b is not changed."""
     n = LU.shape[0]
-    x = np.empty(n)
     for i in range(n):
         x[i] = b[piv[i]]
     for i in range(n):
@@ -94,37 +94,33 @@ def lu_solve(LU, piv, b):
         for k in range(i + 1, n):
             x[i] -= LU[i, k] * x[k]
         x[i] /= LU[i, i]
-    return x
 
 
 @njit(cache=True)
-def _solve_w(n, hg, A, LU, piv, r):
-    """Solve ``(I - hg J) z = r`` for the block Jacobian of the module docstring."""
-    z = r.copy()
-    rv = r[n:2 * n].copy()
+def _solve_w(n, hg, A, LU, piv, r, z, work):
+    """Write to z the solution of ``(I - hg J) z = r`` for the block Jacobian of the
+    module docstring; work is (n,) scratch."""
     for i in range(n):
         s = 0.0
         for j in range(n):
             s += A[i, j] * r[j]
-        rv[i] += hg * s
-    v = lu_solve(LU, piv, rv)
+        work[i] = r[n + i] + hg * s
+    lu_solve(LU, piv, work, z[n:2 * n])
     for i in range(n):
-        z[n + i] = v[i]
-        z[i] = r[i] + hg * v[i]
-    return z
+        z[i] = r[i] + hg * z[n + i]
+    for i in range(2 * n, r.shape[0]):
+        z[i] = r[i]
 
 
 @njit(cache=True)
-def _jac_times(n, A, B, u):
-    """J u for the block Jacobian."""
-    out = np.zeros(u.shape[0])
+def _jac_times(n, A, B, u, out):
+    """Write J u for the block Jacobian to out[:2 n] (its energy rows are zero)."""
     for i in range(n):
         out[i] = u[n + i]
         s = 0.0
         for j in range(n):
             s += A[i, j] * u[j] + B[i, j] * u[n + j]
         out[n + i] = s
-    return out
 
 
 @njit(cache=True)
@@ -146,25 +142,44 @@ def step(P, y, f, h, A, B, K):
     LU, piv, ok = lu_factor(S)
     if not ok:
         return y.copy(), np.full(N, np.inf), False
+    # scratch allocated once per step, not per stage: small-array allocations
+    # cost more than the arithmetic here
+    yi = np.empty(N)
+    r = np.empty(N)
+    u = np.empty(N)
+    Ju = np.empty(2 * n)
+    work = np.empty(n)
     for st in range(4):
         if st == 0:
             fi = f
         else:
-            yi = y.copy()
-            for q in range(st):
-                if _ALPHA[st, q] != 0.0:
-                    yi += _ALPHA[st, q] * K[q]
+            for i in range(N):
+                s = y[i]
+                for q in range(st):
+                    if _ALPHA[st, q] != 0.0:
+                        s += _ALPHA[st, q] * K[q, i]
+                yi[i] = s
             fi = kernels.rhs(P, yi)
-        r = h * fi
+        for i in range(N):
+            r[i] = h * fi[i]
         if st > 0:
-            u = np.zeros(N)
-            for q in range(st):
-                u += _GAMMA[st, q] * K[q]
-            r += h * _jac_times(n, A, B, u)
-        K[st] = _solve_w(n, hg, A, LU, piv, r)
-    y1 = y.copy()
-    err = np.zeros(N)
-    for q in range(4):
-        y1 += _B[q] * K[q]
-        err += (_B[q] - _B_HAT[q]) * K[q]
+            for i in range(N):
+                s = 0.0
+                for q in range(st):
+                    s += _GAMMA[st, q] * K[q, i]
+                u[i] = s
+            _jac_times(n, A, B, u, Ju)
+            for i in range(2 * n):
+                r[i] += h * Ju[i]
+        _solve_w(n, hg, A, LU, piv, r, K[st], work)
+    y1 = np.empty(N)
+    err = np.empty(N)
+    for i in range(N):
+        s = y[i]
+        e = 0.0
+        for q in range(4):
+            s += _B[q] * K[q, i]
+            e += (_B[q] - _B_HAT[q]) * K[q, i]
+        y1[i] = s
+        err[i] = e
     return y1, err, True

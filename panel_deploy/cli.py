@@ -165,6 +165,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _interrupt(signum, frame):
+    # numba hands arrays back from compiled code through a Python callback
+    # (numba.core.serialize) whose errors it does not check: raised there, the
+    # KeyboardInterrupt would surface as a SystemError. Deliver it again a
+    # moment later instead, when the interpreter is back in our code.
+    if frame is not None and frame.f_globals.get("__name__", "").startswith("numba"):
+        threading.Timer(0.01, os.kill, (os.getpid(), signum)).start()
+        return
     raise KeyboardInterrupt
 
 

@@ -140,3 +140,24 @@ def test_sigterm_during_optimise_saves_the_best_so_far(tmp_path):
     assert data["status"] == 3 and data["message"].startswith("interrupted after")
     k = load_stiffness(out, build_model(load_scene(PAPER)))
     assert k.shape == (12,) and np.all(k > 0)
+
+
+def test_sigterm_inside_numbas_callback_is_delivered_again_later():
+    # Raised inside numba's unpickling callback, the KeyboardInterrupt would
+    # become a SystemError; the handler must defer it, not drop it.
+    import signal
+    import time
+    from types import SimpleNamespace
+
+    from panel_deploy.cli import _interrupt
+
+    previous = signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            _interrupt(signal.SIGTERM, SimpleNamespace(f_globals={"__name__": "panel_deploy.x"}))
+        inside_numba = SimpleNamespace(f_globals={"__name__": "numba.core.serialize"})
+        assert _interrupt(signal.SIGTERM, inside_numba) is None
+        with pytest.raises(KeyboardInterrupt):
+            time.sleep(2.0)
+    finally:
+        signal.signal(signal.SIGTERM, previous)

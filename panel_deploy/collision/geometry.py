@@ -101,9 +101,8 @@ class BoxSet:
 
     def separation(self, i: int, j: int, n) -> float:
         """Gap (m) between the projections of boxes i and j on the unit vector n."""
-        ra = np.abs(self.rotation[i].T @ n) @ self.half[i]
-        rb = np.abs(self.rotation[j].T @ n) @ self.half[j]
-        return float(n @ (self.position[j] - self.position[i]) - ra - rb)
+        return separation(self.rotation[i], self.position[i], self.half[i],
+                          self.rotation[j], self.position[j], self.half[j], n)
 
     def signed_distance(self, i: int, j: int) -> float:
         """Signed distance (m) of boxes i and j: distance, or minus penetration depth."""
@@ -128,20 +127,14 @@ class BoxSet:
         normals and the 9 edge cross products contain the direction of least
         overlap, so the smallest overlap over those 15 axes is the depth.
         The point is the centre of FCL's box-box contact manifold."""
-        Ra, Rb = self.rotation[i], self.rotation[j]
-        axes = np.concatenate([Ra.T, Rb.T, np.cross(Ra.T[:, None], Rb.T[None]).reshape(9, 3)])
-        norm = np.linalg.norm(axes, axis=1)
-        axes = axes[norm > 1e-9] / norm[norm > 1e-9, None]
-        delta = self.position[j] - self.position[i]
-        along = axes @ delta
-        overlap = (np.abs(axes @ Ra) @ self.half[i] + np.abs(axes @ Rb) @ self.half[j] - np.abs(along))
-        k = np.argmin(overlap)
-        if overlap[k] < 0.0:
+        overlap, axis, along = least_overlap(self.rotation[i], self.position[i], self.half[i],
+                                             self.rotation[j], self.position[j], self.half[j])
+        if overlap < 0.0:
             # FCL said "in contact" but an axis separates them: apart by a hair.
             self.exact_fallbacks += 1
             d, pa, pb = self._exact_distance(i, j)
-            return PairGeometry(d, pa, pb, axes[k] * np.sign(along[k]))
-        n = axes[k] * (1.0 if along[k] >= 0 else -1.0)
+            return PairGeometry(d, pa, pb, axis * np.sign(along))
+        n = axis * (1.0 if along >= 0 else -1.0)
         result = fcl.CollisionResult()
         fcl.collide(self._objects[i], self._objects[j], self._contact_request, result)
         if result.contacts:
@@ -149,7 +142,7 @@ class BoxSet:
         else:
             x = 0.5 * (self.corners(i)[np.argmax(self.corners(i) @ n)]
                        + self.corners(j)[np.argmin(self.corners(j) @ n)])
-        return PairGeometry(float(-overlap[k]), x, x, n)
+        return PairGeometry(float(-overlap), x, x, n)
 
     def corners(self, i: int) -> np.ndarray:
         """The 8 corners (8, 3) of box i, m."""
@@ -159,6 +152,64 @@ class BoxSet:
         """Distance (m) of apart boxes i and j and its nearest points: :func:`box_distance`."""
         return box_distance(self.rotation[i], self.position[i], self.half[i],
                             self.rotation[j], self.position[j], self.half[j])
+
+
+@njit(cache=True)
+def _radius(R, h, n):
+    """Half-extent (m) along the unit vector n (3,) of a box of rotation R (3, 3) and half edges h (3,)."""
+    r = 0.0
+    for k in range(3):
+        r += abs(n[0] * R[0, k] + n[1] * R[1, k] + n[2] * R[2, k]) * h[k]
+    return r
+
+
+@njit(cache=True)
+def separation(Ra, ca, ha, Rb, cb, hb, n):
+    """Gap (m) between the projections on the unit vector ``n`` (3,) of the boxes
+    (R (3, 3), centre c (3,), half edges h (3,), ground frame, m) a and b."""
+    along = n[0] * (cb[0] - ca[0]) + n[1] * (cb[1] - ca[1]) + n[2] * (cb[2] - ca[2])
+    return along - _radius(Ra, ha, n) - _radius(Rb, hb, n)
+
+
+@njit(cache=True)
+def least_overlap(Ra, ca, ha, Rb, cb, hb):
+    """Separating-axis test of boxes a and b (given as in :func:`separation`).
+
+    Over the 15 candidate axes (the 3 + 3 face normals, then the 9 edge cross
+    products a_i x b_j, in that order; near-parallel edge pairs skipped), the
+    axis of least overlap: returns ``(overlap, axis, along)`` with the overlap
+    (m, < 0 if that axis separates the boxes), the unit axis (3,) and the
+    centre offset ``(c_b - c_a) . axis`` (m) that gives its direction. The
+    first of equal overlaps wins.
+    """
+    best = np.inf
+    axis = np.zeros(3)
+    along_best = 0.0
+    u = np.empty(3)
+    for k in range(15):
+        if k < 3:
+            for m in range(3):
+                u[m] = Ra[m, k]
+        elif k < 6:
+            for m in range(3):
+                u[m] = Rb[m, k - 3]
+        else:
+            i, j = (k - 6) // 3, (k - 6) % 3
+            u[0] = Ra[1, i] * Rb[2, j] - Ra[2, i] * Rb[1, j]
+            u[1] = Ra[2, i] * Rb[0, j] - Ra[0, i] * Rb[2, j]
+            u[2] = Ra[0, i] * Rb[1, j] - Ra[1, i] * Rb[0, j]
+        norm = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+        if norm <= 1e-9:
+            continue
+        for m in range(3):
+            u[m] /= norm
+        along = u[0] * (cb[0] - ca[0]) + u[1] * (cb[1] - ca[1]) + u[2] * (cb[2] - ca[2])
+        overlap = _radius(Ra, ha, u) + _radius(Rb, hb, u) - abs(along)
+        if overlap < best:
+            best = overlap
+            axis[:] = u
+            along_best = along
+    return best, axis, along_best
 
 
 @njit(cache=True)

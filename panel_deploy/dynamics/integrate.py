@@ -113,14 +113,8 @@ def first_switch(n, y0, y1, h, tol):
 def max_gap(P, y):
     """Largest loop-closure gap at state y, m."""
     n = P.n
-    R, p, w, vo, S = kernels.kinematics(P, y[:n], y[n:2 * n])
-    out = 0.0
-    for j in range(P.cut_a.shape[0]):
-        Ma, Na, Mb, Nb = kernels._cut_ends(P, j, R, p)
-        dM, dN = kernels._sub(Mb, Ma), kernels._sub(Nb, Na)
-        out = max(out, math.sqrt(kernels._dot(dM, dM)))
-        out = max(out, math.sqrt(kernels._dot(dN, dN)))
-    return out
+    R, p, _, _, _ = kernels.kinematics(P, y[:n], y[n:2 * n])
+    return kernels.largest_gap(P, R, p)
 
 
 # --- compiled Dormand-Prince 5(4) ---

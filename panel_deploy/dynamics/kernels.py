@@ -309,29 +309,14 @@ def _cut_ends(P, j, R, p):
 
 
 @njit(cache=True)
-def cut_geometry(P, R, p, w, vo):
-    """Ends and gaps of every cut hinge.
-
-    Returns (m, 4, 3) points (M_a, N_a, M_b, N_b) and (m, 2, 3) gaps
-    (M_b - M_a, N_b - N_a) with their rates (m, 2, 3), m and m/s.
-    """
-    m = P.cut_a.shape[0]
-    pts = np.empty((m, 4, 3))
-    gap = np.empty((m, 2, 3))
-    rate = np.empty((m, 2, 3))
-    for j in range(m):
-        a, b = P.cut_a[j], P.cut_b[j]
-        ends = _cut_ends(P, j, R, p)
-        for e in range(2):
-            xa, xb = ends[e], ends[2 + e]
-            d = _sub(xb, xa)
-            v = _sub(_point_velocity(w, vo, b, xb), _point_velocity(w, vo, a, xa))
-            for k in range(3):
-                pts[j, e, k] = xa[k]
-                pts[j, 2 + e, k] = xb[k]
-                gap[j, e, k] = d[k]
-                rate[j, e, k] = v[k]
-    return pts, gap, rate
+def largest_gap(P, R, p):
+    """Largest loop-closure gap |M_b - M_a| or |N_b - N_a| over the cut hinges, m."""
+    out = 0.0
+    for j in range(P.cut_a.shape[0]):
+        Ma, Na, Mb, Nb = _cut_ends(P, j, R, p)
+        dM, dN = _sub(Mb, Ma), _sub(Nb, Na)
+        out = max(out, math.sqrt(_dot(dM, dM)), math.sqrt(_dot(dN, dN)))
+    return out
 
 
 @njit(cache=True)
@@ -688,10 +673,7 @@ def observe(P, y):
     R, p, w, vo, S = kin
     gap = 0.0
     if P.method != TREE:
-        pts, d, rate = cut_geometry(P, R, p, w, vo)
-        for j in range(d.shape[0]):
-            for e in range(2):
-                gap = max(gap, math.sqrt(_dot(d[j, e], d[j, e])))
+        gap = largest_gap(P, R, p)
         c, J, gamma = closure_jacobian(P, R, p, w, vo, S, np.zeros((0, 6)))
     else:
         J = np.zeros((0, n))

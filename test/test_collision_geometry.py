@@ -14,7 +14,7 @@ from scipy.optimize import lsq_linear
 from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
-from panel_deploy.collision.geometry import BoxSet, box_distance
+from panel_deploy.collision.geometry import BoxSet, box_distance, least_overlap, pair_bounds
 from panel_deploy.model import Body, box_inertia
 
 SIGNS = np.array([(i, j, k) for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
@@ -182,3 +182,28 @@ def test_compiled_box_distance_matches_numpy_enumeration():
         assert np.all(np.abs((pb - cb) @ Rb) <= hb + 1e-12)
         if k < 200 or (k >= 300 and k % 2 == 0):
             assert np.abs(pa - pa0).max() < 1e-12 and np.abs(pb - pb0).max() < 1e-12
+
+
+def test_pair_bounds_give_the_depth_and_bracket_the_distance():
+    # Batched: the separating-axis overlap of every pair (the depth of an
+    # interfering one) and, for an apart one, -overlap <= distance <= upper.
+    rng = np.random.default_rng(4)
+    ha, hb = np.array(UNIT) / 2, np.array(LARGE) / 2
+    n = 400
+    R = Rotation.random(2 * n, random_state=rng).as_matrix()
+    c = np.zeros((2 * n, 3))
+    c[1::2] = rng.normal(size=(n, 3)) * 0.06
+    h = np.tile(np.array([ha, hb]), (n, 1))
+    a, b = np.arange(0, 2 * n, 2), np.arange(1, 2 * n, 2)
+    overlap, upper = pair_bounds(R, c, h, a, b)
+    apart = 0
+    for k in range(n):
+        i, j = a[k], b[k]
+        assert overlap[k] == least_overlap(R[i], c[i], h[i], R[j], c[j], h[j])[0]
+        ref = reference_signed_distance(h[i], R[i], c[i], h[j], R[j], c[j])
+        if overlap[k] > 0:
+            assert overlap[k] == pytest.approx(-ref, abs=1e-12)
+        else:
+            apart += 1
+            assert -overlap[k] <= ref + 1e-12 and ref <= upper[k] + 1e-12
+    assert 50 < apart < n

@@ -304,3 +304,39 @@ def test_monitor_poses_are_the_numpy_forward_kinematics():
         R_ref, p_ref = forward_kinematics(m, theta)
         np.testing.assert_allclose(R, R_ref, atol=1e-14)
         np.testing.assert_allclose(p, p_ref, atol=1e-14)
+
+
+def test_resting_pairs_settled_without_an_exact_distance_keep_every_verdict():
+    # Resting pairs whose collision and release can be told from bounds keep a
+    # lower bound instead of an exact distance; every verdict (collision,
+    # release from the package, d) must be the one exact distances give.
+    from pathlib import Path
+    from dataclasses import replace
+    from panel_deploy.build import build_model
+    from panel_deploy.collision.geometry import BoxSet
+    from panel_deploy.dynamics import simulate
+    from panel_deploy.scene import load_scene
+
+    scene = load_scene(Path(__file__).resolve().parent.parent / "config" / "scenes" / "paper_4x4.yaml")
+    m = build_model(scene)
+    run = simulate(m, replace(scene.simulation, t_end=0.45, samples=91))
+    mon = CollisionMonitor(m, CollisionSettings(margin=math.inf))
+    boxes = BoxSet(m)
+    tol = mon.settings.tolerance
+    settled = 0
+    for j in range(len(run.t)):
+        mon.update(run.t[j], run.theta[j], run.omega[j])
+        boxes.set_poses(run.rotation[j], run.position[j])
+        ref = np.array([boxes.signed_distance(a, b) for a, b in mon.pairs])
+        if j == 0:
+            release, resting = ref + mon.package_height, ref <= mon.package_height
+        resting &= ~(ref > release)
+        np.testing.assert_allclose(mon.distances[mon.exact], ref[mon.exact], atol=1e-12)
+        assert np.all(mon.distances <= ref + 1e-12)
+        np.testing.assert_array_equal(mon.colliding, ref < -tol)
+        np.testing.assert_array_equal(mon.resting, resting)
+        counts = ~mon.flat_contact & ~resting
+        assert mon.min_distance == (ref[counts].min() if counts.any() else math.inf)
+        settled += int(np.count_nonzero(~mon.exact & mon.resting))
+    assert settled > 100          # the shortcut was taken
+    assert mon.colliding.any()    # K_0 collides at 0.42 s: a verdict was tested

@@ -213,22 +213,27 @@ class TrajectoryCheck:
     def collided(self) -> bool:
         return bool(self.first_events)
 
-    def feed(self, result, *, stop_at_first: bool = True) -> bool:
+    def feed(self, result, *, stop_at_first: bool = True, poses: bool = False) -> bool:
         """Check the samples of ``result`` (a SimulationResult or a block of one).
 
         Returns True once a collision has been found; with ``stop_at_first``
-        the samples after the one that revealed it are not checked.
+        the samples after the one that revealed it are not checked. With
+        ``poses`` the bodies' poses are taken from ``result.rotation`` and
+        ``result.position`` instead of being recomputed from ``theta``: for
+        a result just simulated, not for one read from a file, whose poses
+        could disagree with its angles.
         """
         for j in range(len(result.t)):
             if self.collided and stop_at_first:
                 break
-            self.update(result.t[j], result.theta[j], result.omega[j])
+            self.update(result.t[j], result.theta[j], result.omega[j],
+                        (result.rotation[j], result.position[j]) if poses else None)
         return self.collided
 
-    def update(self, t, theta, omega) -> list:
-        """Check one sample; the collision events it revealed."""
+    def update(self, t, theta, omega, poses=None) -> list:
+        """Check one sample (``poses`` as :meth:`CollisionMonitor.update`); the collision events it revealed."""
         m = self.monitor
-        events = m.update(t, theta, omega)
+        events = m.update(t, theta, omega, poses)
         j = self.checked
         if j == len(self._t):
             grow = max(64, j)

@@ -213,6 +213,34 @@ def least_overlap(Ra, ca, ha, Rb, cb, hb):
 
 
 @njit(cache=True)
+def pair_bounds(R, c, h, a, b):
+    """Separating-axis overlap and a corner upper bound of many box pairs, m.
+
+    ``R`` (nb, 3, 3), ``c`` (nb, 3) and ``h`` (nb, 3) are the boxes as in
+    :func:`separation`, ``a`` and ``b`` (P,) the pairs' box indices.
+    Returns ``(overlap, upper)``, each (P,): ``overlap`` is
+    :func:`least_overlap`'s (> 0 the depth of an interfering pair, exact for
+    boxes; < 0 minus a lower bound on the distance of an apart one), and
+    ``upper`` the smallest distance of a corner of either box from the
+    other box, an upper bound on the pair's distance.
+    """
+    overlap = np.empty(len(a))
+    upper = np.empty(len(a))
+    q = np.empty(3)
+    for k in range(len(a)):
+        i, j = a[k], b[k]
+        overlap[k] = least_overlap(R[i], c[i], h[i], R[j], c[j], h[j])[0]
+        best = np.inf
+        for x, y in ((i, j), (j, i)):
+            corners = _corners(R[x], c[x], h[x])
+            for m in range(8):
+                _clamp_to_box(corners[m], R[y], c[y], h[y], q)
+                best = min(best, _distance(corners[m], q))
+        upper[k] = best
+    return overlap, upper
+
+
+@njit(cache=True)
 def box_distance(Ra, ca, ha, Rb, cb, hb):
     """Distance of two apart boxes by enumerating vertex/box and edge/edge pairs.
 

@@ -66,7 +66,7 @@ from ..dynamics.pack import pack
 from ..dynamics.simulate import body_states
 from ..errors import SceneError, TrajectoryError
 from ..model import Model
-from .geometry import BoxSet, PairGeometry
+from .geometry import BoxSet, PairGeometry, pair_bounds
 from .motion import HermiteSegment, PairSpeedBound
 
 
@@ -178,7 +178,7 @@ class _Sample:
     distances: np.ndarray
     exact: np.ndarray
     linear: bool
-    radii: np.ndarray
+    radii: np.ndarray | None
 
 
 def _segment(prev: _Sample, cur: _Sample) -> HermiteSegment:
@@ -267,7 +267,7 @@ class CollisionMonitor:
         a, b = self.pairs[p]
         return self.model.bodies[a].name, self.model.bodies[b].name
 
-    def update(self, t, theta, omega=None) -> list:
+    def update(self, t, theta, omega=None, poses=None) -> list:
         """Take the state at instant t; return the collisions that began since the last one.
 
         Parameters
@@ -280,6 +280,10 @@ class CollisionMonitor:
             Hinge rates, rad/s. Without them (e.g. encoder angles only) the
             rates are the secant slopes, so the motion between updates is
             taken to be linear in theta.
+        poses : (rotation, position), optional
+            The bodies' rotations (nb, 3, 3) and centroids (nb, 3), m, at
+            ``theta`` when the caller has them (a SimulationResult does),
+            saving the forward kinematics.
 
         Returns
         -------
@@ -299,14 +303,16 @@ class CollisionMonitor:
         else:
             omega = np.asarray(omega, dtype=float)
 
-        R, p = self._kinematics(theta)
+        R, p = self._kinematics(theta) if poses is None else poses
         self._boxes.set_poses(R, p)
         D, exact = self._sample_distances()
         if self.resting is None:
             self.package_height = float(np.ptp(p[:, 2]) + max(b.size[2] for b in self.model.bodies))
             self._release = D + self.package_height
             self.resting = D <= self.package_height
-        cur = _Sample(t, theta, omega, D, exact, linear, self._speed.radii(R, p))
+        # The hinge-line radii only bound the motion between samples.
+        radii = self._speed.radii(R, p) if self.settings.refine else None
+        cur = _Sample(t, theta, omega, D, exact, linear, radii)
 
         tol = self.settings.tolerance
         if prev is not None and self.settings.refine:
@@ -353,12 +359,15 @@ class CollisionMonitor:
         lb = self._boxes.lower_bounds(self.pairs)
         D = lb.copy()
         exact = np.zeros(len(lb), dtype=bool)
+        settled = self._resting_distances(lb, D, exact)
         counts = ~self.flat_contact & (~self.resting if self.resting is not None else True)
         best = math.inf
         margin = self.settings.margin
         for k in np.argsort(lb, kind="stable"):
             if lb[k] > margin and lb[k] >= best:
                 break
+            if settled[k]:
+                continue
             D[k] = self._boxes.signed_distance(*self.pairs[k])
             exact[k] = True
             if counts[k]:
@@ -366,6 +375,33 @@ class CollisionMonitor:
         self.counters["exact_pairs"] += int(exact.sum())
         self.counters["pruned_pairs"] += int((~exact).sum())
         return D, exact
+
+    def _resting_distances(self, lb, D, exact):
+        """Settle the resting pairs that need no exact distance; True where settled.
+
+        A resting pair does not count towards d, so its distance matters only
+        to tell a collision, which the separating-axis depth does exactly, and
+        its release from the package (``D > _release``), which cannot happen
+        while a corner of one box is no further than the release distance
+        from the other. Those pairs keep a lower bound (``exact`` False). On
+        the paper scene resting pairs were 86 % of the exact queries of a
+        locked run.
+        """
+        settled = np.zeros(len(lb), dtype=bool)
+        if self.resting is None:
+            return settled
+        rows = np.flatnonzero(self.resting)
+        b = self._boxes
+        overlap, upper = pair_bounds(b.rotation, b.position, b.half, self.pairs[rows, 0], self.pairs[rows, 1])
+        # Deeper than the tolerance only: a touching pair's overlap can have
+        # the wrong sign at ~1e-10 m (near-parallel edge axes are skipped).
+        deep = overlap > self.settings.tolerance
+        held = ~deep & (upper <= self._release[rows])
+        D[rows[deep]], exact[rows[deep]] = -overlap[deep], True
+        D[rows[held]] = np.where(overlap[held] > 0.0, -overlap[held],
+                                 np.maximum(lb[rows[held]], -overlap[held]))
+        settled[rows[deep | held]] = True
+        return settled
 
     # --- between samples -------------------------------------------------------------------
 

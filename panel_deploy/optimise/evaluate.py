@@ -189,7 +189,7 @@ def run_deployment(model, settings) -> Outcome:
         flat = np.flatnonzero(spread <= FLAT_TOLERANCE)
         block = result.head(flat[0] + 1) if len(flat) else result
         n_before = check.checked
-        check.feed(block)
+        check.feed(block, poses=True)
         valid = spread[:(check.n_valid if check.collided else check.checked) - n_before]
         closest = min(closest, float(valid.min()) if len(valid) else math.inf)
         if check.collided or len(flat):

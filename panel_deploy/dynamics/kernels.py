@@ -206,6 +206,30 @@ def kinematics(P, theta, omega):
     return R, p, w, vo, S
 
 
+@njit(cache=True)
+def body_states(P, theta, omega):
+    """Pose and velocity of every body in model body order (``P.body``).
+
+    Returns the rotations (nb, 3, 3), centroids (nb, 3) m, centroid
+    velocities (nb, 3) m/s and angular velocities (nb, 3) rad/s, in the
+    ground frame, from :func:`kinematics`, whose ``vo`` is the velocity of
+    the body point at the ground origin, not of the centroid.
+    """
+    Rk, pk, wk, vo, _ = kinematics(P, theta, omega)
+    nb = P.n + 1
+    R = np.empty((nb, 3, 3))
+    p = np.empty((nb, 3))
+    v = np.empty((nb, 3))
+    w = np.empty((nb, 3))
+    for i in range(nb):
+        b = P.body[i]
+        R[b] = Rk[i]
+        p[b] = pk[i]
+        w[b] = wk[i]
+        _put(v, b, _add(_get(vo, i), _cross(_get(wk, i), _get(pk, i))))
+    return R, p, v, w
+
+
 # --- spatial inertia ---
 # About the ground origin a body of mass m, centroid c, is [[J, [h]x],
 # [-[h]x, m 1]] with J = R I R^T - m [c]x^2 and h = m c; a composite body is

@@ -159,13 +159,8 @@ def body_states(P, theta, omega):
     centroids (nb, 3) m, centroid velocities (nb, 3) m/s and angular
     velocities (nb, 3) rad/s, in the ground frame.
     """
-    Rk, pk, wk, vo, _ = kernels.kinematics(P, theta, omega)
-    # The kernels put the ground last, and their vo is the velocity of the body
-    # point at the ground origin, not of the centroid.
-    R, p, v, w = np.empty_like(Rk), np.empty_like(pk), np.empty_like(vo), np.empty_like(wk)
-    R[P.body], p[P.body], w[P.body] = Rk, pk, wk
-    v[P.body] = vo + np.cross(wk, pk)
-    return R, p, v, w
+    return kernels.body_states(P, np.ascontiguousarray(theta, dtype=float),
+                               np.ascontiguousarray(omega, dtype=float))
 
 
 def _result(P, t, run, method, wall, gap_limit) -> SimulationResult:

@@ -334,9 +334,38 @@ def test_resting_pairs_settled_without_an_exact_distance_keep_every_verdict():
         np.testing.assert_allclose(mon.distances[mon.exact], ref[mon.exact], atol=1e-12)
         assert np.all(mon.distances <= ref + 1e-12)
         np.testing.assert_array_equal(mon.colliding, ref < -tol)
+        np.testing.assert_array_equal(np.abs(mon.distances) <= tol, np.abs(ref) <= tol)  # touching
         np.testing.assert_array_equal(mon.resting, resting)
         counts = ~mon.flat_contact & ~resting
         assert mon.min_distance == (ref[counts].min() if counts.any() else math.inf)
         settled += int(np.count_nonzero(~mon.exact & mon.resting))
     assert settled > 100          # the shortcut was taken
     assert mon.colliding.any()    # K_0 collides at 0.42 s: a verdict was tested
+
+
+def test_a_resting_pair_whose_bounds_straddle_the_tolerance_gets_its_exact_distance():
+    # Corner to corner along their diagonal, 1.1 tolerances apart, both turned
+    # by Q: the bounding boxes and the separating axes (g / sqrt 3) say
+    # touching, the truth does not, and the refinement must not take the pair
+    # for touching.
+    from scipy.spatial.transform import Rotation
+    from panel_deploy.collision.geometry import BoxSet, least_overlap
+    m = fold_model()
+    mon = CollisionMonitor(m, CollisionSettings(margin=math.inf, refine=False))
+    tol = mon.settings.tolerance
+    Q = Rotation.from_euler("zx", [30, 20], degrees=True).as_matrix()
+    R = np.array([np.eye(3), Q, Q])
+    half = np.array([A, A, T]) / 2
+    stacked = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 0.0], Q @ [0.0, 0.0, T]])
+    mon.update(0.0, [math.pi, math.pi], poses=(R, stacked))
+    assert mon.resting[0] and abs(mon.distances[0]) < 1e-12
+    g = 1.1 * tol
+    corner = stacked.copy()
+    corner[2] = Q @ (2 * half + g * np.ones(3) / math.sqrt(3))
+    boxes = BoxSet(m)
+    boxes.set_poses(R, corner)
+    assert boxes.lower_bounds(mon.pairs)[0] < tol and -least_overlap(*(
+        x for i in (1, 2) for x in (R[i], corner[i], half)))[0] < tol
+    mon.update(0.1, [math.pi, math.pi], poses=(R, corner))
+    assert mon.resting[0] and mon.exact[0]
+    assert mon.distances[0] == pytest.approx(g, rel=1e-9)

@@ -215,7 +215,8 @@ class CollisionMonitor:
         Pairs with sd < -tolerance at the last update.
     distances : (P,) ndarray
         Signed distances at the last update, m; where ``exact`` is False a
-        lower bound above ``settings.margin``.
+        lower bound, above ``settings.margin`` or, for a resting pair, one that
+        decides its collision, touching and release as the exact one would.
     exact : (P,) ndarray of bool
     min_distance : float
         Smallest distance of the last update over the pairs that count

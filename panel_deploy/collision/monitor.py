@@ -391,9 +391,9 @@ class CollisionMonitor:
         run.
         """
         settled = np.zeros(len(lb), dtype=bool)
-        if self.resting is None:
+        rows = np.flatnonzero(self.resting) if self.resting is not None else []
+        if not len(rows):
             return settled
-        rows = np.flatnonzero(self.resting)
         b = self._boxes
         overlap, upper = pair_bounds(b.rotation, b.position, b.half, self.pairs[rows, 0], self.pairs[rows, 1])
         tol = self.settings.tolerance

@@ -3,11 +3,15 @@ with the exact closure and with penalty springs of several stiffnesses k_M = k_N
 
     python bench/closure_release.py [SCENE] [--stiffness RESULT.yaml] [--t-end 4]
                                     [--k-M 1e5 3e5 1e6 2e6 4e6] [--set KEY=VALUE ...]
+                                    [--angles HINGE ... --window T0 T1]
 
 The paper design passes a singular configuration of its closed loop on the way to
 flat (NOTES.md section 6); this shows how much its deployment owes to the
 compliance of the closure there. Sample spacing and every other setting are the
-scene's (the spacing is kept when --t-end lengthens the run).
+scene's (the spacing is kept when --t-end lengthens the run). ``--angles`` prints
+those hinges' angles (rad) at every sample in ``--window`` for each closure: at
+the singular configuration the loop can leave it only when every hinge of a side
+column is flat at once.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from panel_deploy.build import build_model  # noqa: E402
 from panel_deploy.dynamics import simulate  # noqa: E402
-from panel_deploy.dynamics.report import hinge_release_report  # noqa: E402
+from panel_deploy.dynamics.report import hinge_angles, hinge_release_report  # noqa: E402
 from panel_deploy.errors import PanelDeployError  # noqa: E402
 from panel_deploy.scene import load_scene, resolve_scene  # noqa: E402
 
@@ -56,6 +60,9 @@ def main(argv=None):
     p.add_argument("--t-end", type=float, default=4.0, help="s")
     p.add_argument("--k-M", type=float, nargs="+", default=[1e5, 3e5, 1e6, 2e6, 4e6], help="N/m")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    p.add_argument("--angles", nargs="+", default=[], metavar="HINGE", help="hinge names to print")
+    p.add_argument("--window", type=float, nargs=2, default=(0.6, 0.7), metavar=("T0", "T1"),
+                   help="s, where --angles prints")
     args = p.parse_args(argv)
     try:
         scene = load_scene(resolve_scene(args.scene), args.set)
@@ -84,6 +91,20 @@ def main(argv=None):
         gap = result.constraint_gap.max()
         print(f"{label:20s} {name:>24s} {when(at):>7s} {when(report['flat_at']):>11s} "
               f"{gap:11.2e} {wall:8.1f}" + ("" if result.success else f"  ({result.message})"))
+        if args.angles:
+            print_angles(model, result, args.angles, args.window)
+
+
+def print_angles(model, result, wanted, window):
+    """The angles (rad) of the hinges ``wanted`` at every sample in ``window`` (s)."""
+    names, _, theta = hinge_angles(model, result)
+    unknown = sorted(set(wanted) - set(names))
+    if unknown:
+        sys.exit(f"closure_release: --angles: no hinge named {', '.join(unknown)}")
+    cols = [names.index(n) for n in wanted]
+    print("    t (s) " + " ".join(f"{n:>11s}" for n in wanted))
+    for j in ((result.t >= window[0]) & (result.t <= window[1])).nonzero()[0]:
+        print(f"    {result.t[j]:.3f} " + " ".join(f"{theta[j, c]:+11.5f}" for c in cols))
 
 
 if __name__ == "__main__":

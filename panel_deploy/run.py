@@ -49,7 +49,7 @@ def simulate_command(args, scene) -> int:
     if args.out:
         from .trajectory_io import save_trajectory
         save_trajectory(args.out, result, scene, model)
-    summary = deployment_summary(model, result, report)
+    summary = deployment_summary(model, result, report, flat_tol=scene.simulation.flat_tolerance)
     summary["scene"] = scene.name or scene.source
     print(json.dumps(summary) if args.json else summary_text(summary))
     return 0 if result.success else 1

@@ -234,6 +234,9 @@ class SimulationSection:
     max_step: float = spec(math.inf, number(0, low_open=True, allow_inf=True), "s", "largest step")
     samples: int = spec(301, integer(3), "", "number s of evenly spaced sample instants t_j")
     events: bool = spec(True, boolean, "", "locate joint-limit contact switches as solver events")
+    flat_tolerance: float = spec(0.05, number(0, low_open=True), "rad",
+                                 "the array counts as flat (deployed) at the first sample where "
+                                 "every hinge has |theta| <= this")
 
 
 @dataclass(frozen=True)

@@ -50,6 +50,16 @@ def test_simulate_saves_and_collide_reads_back(capsys, tmp_path):
     assert code == 0 and json.loads(out)["collided"] is False
 
 
+def test_simulate_reports_flat_by_the_scenes_flat_tolerance(capsys):
+    # Stowed hinges sit at pi: flat from the first sample once the tolerance
+    # exceeds pi, never within 5 ms by the paper scene's 0.05 rad.
+    for tol, first_flat in (("3.2", 0.0), ("0.05", None)):
+        code, out, _ = run(capsys, "simulate", "paper_4x4", "--t-end", "0.005", "--method",
+                           "compiled", "--json", "--set", f"simulation.flat_tolerance={tol}")
+        s = json.loads(out)
+        assert code == 0 and s["flat_tolerance"] == float(tol) and s["time_to_flat"] == first_flat
+
+
 def test_simulate_text_summary_and_exact_closure(capsys):
     code, out, _ = run(capsys, "simulate", PAPER, "--t-end", "0.005", "--closure", "exact",
                        "--method", "compiled")

@@ -105,6 +105,30 @@ def test_run_stops_at_the_first_collision_and_at_first_flat():
     assert ev.outcome.t_stop == pytest.approx(first_flat) and first_flat < 0.6
 
 
+def test_the_scenes_flat_tolerance_decides_when_the_run_is_flat():
+    # One plate whose angle falls monotonically: its first sample within tol of
+    # flat ends the run, and a looser tolerance ends it earlier, by the closed form.
+    model = chain_model(2, beta=BETA)
+    t_end, samples = 0.2, 41
+    t = np.linspace(0, t_end, samples)
+    angle = np.array([abs(plate_angle(0.2, tj)) if tj > 0 else math.pi for tj in t])
+    stops = []
+    for tol in (0.05, 0.3):
+        s = short_scene(t_end, samples=samples)
+        s = s.replace(simulation=replace(s.simulation, flat_tolerance=tol))
+        ev = evaluate(model, [0.2], s)
+        assert ev.outcome.flat_tolerance == tol and ev.outcome.reached_flat
+        assert ev.outcome.t_stop == pytest.approx(t[np.argmax(angle <= tol)])
+        assert ev.outcome.flat_residual <= tol < ev.outcome.flat_residual + 0.2
+        stops.append(ev.outcome.t_stop)
+    assert stops[1] < stops[0]
+    # Judged against a tighter tolerance the same run is short of flat and scores so.
+    s = short_scene(stops[1], samples=int(round(stops[1] / (t_end / (samples - 1)))) + 1)
+    tight = evaluate(model, [0.2], s.replace(simulation=replace(s.simulation, flat_tolerance=0.05)))
+    assert not tight.outcome.reached_flat
+    assert tight.f == pytest.approx(tight.outcome.flat_residual - 0.05)
+
+
 def test_a_colliding_run_earns_no_clearance_on_the_paper_scene():
     # Eq. (8)'s d is the minimum over all D_j, and the colliding pair's D_j is 0:
     # the 45 mm of clearance before K_0's collision must not be credited.

@@ -65,6 +65,7 @@ def test_defaults_and_density():
     ("simulation.method", "Euler", "simulation.method: expected one of RK23"),
     ("simulation.samples", 2, "simulation.samples: expected an integer >= 3"),
     ("simulation.t_end", float("nan"), "simulation.t_end: expected a finite number"),
+    ("simulation.flat_tolerance", 0, "simulation.flat_tolerance: expected a number > 0"),
     ("closure.method", "lagrange", "closure.method: expected one of penalty, exact"),
     ("fold.ground", [0, 1], "fold.ground: expected a cell"),
     ("fold.circuit", "zigzag", "fold.circuit: expected a circuit index or a list of cells"),

@@ -6,12 +6,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model
+from ..scene import SimulationSection
 from .result import SimulationResult
 
 #: A hinge has left its stowed angle once |theta - theta_stowed| exceeds this, rad.
 RELEASE_TOL = 1e-2
-#: The array is flat once every hinge (cut hinges included) has |theta| below this, rad.
-FLAT_TOL = 0.05
+#: The array is flat once every hinge (cut hinges included) has |theta| at most
+#: this, rad: the default of the scene's ``simulation.flat_tolerance``.
+FLAT_TOL = SimulationSection.flat_tolerance
 
 
 def hinge_angles(model: Model, result: SimulationResult):
@@ -44,7 +46,7 @@ def hinge_release_report(model: Model, result: SimulationResult, *, release_tol=
     -------
     dict with
         "hinges": {name: {"released_at": float or None, "final": rad}},
-        "flat_at": float or None (first t_j with all |theta| < flat_tol),
+        "flat_at": float or None (first t_j with all |theta| <= flat_tol),
         "locked": names of hinges that never left their stowed angle,
         "release_tol", "flat_tol".
     """
@@ -55,15 +57,15 @@ def hinge_release_report(model: Model, result: SimulationResult, *, release_tol=
         hinges[name] = {"released_at": first_time(result.t, np.abs(theta[:, k] - stowed[k]) > release_tol),
                         "final": float(theta[-1, k])}
     return {"hinges": hinges,
-            "flat_at": first_time(result.t, np.all(np.abs(theta) < flat_tol, axis=1)),
+            "flat_at": first_time(result.t, np.all(np.abs(theta) <= flat_tol, axis=1)),
             "locked": [nm for nm, h in hinges.items() if h["released_at"] is None],
             "release_tol": release_tol, "flat_tol": flat_tol}
 
 
-def summary(model: Model, result: SimulationResult) -> dict:
-    """One-dict summary of a run for the CLI (SI units, JSON-ready)."""
+def summary(model: Model, result: SimulationResult, *, flat_tol=FLAT_TOL) -> dict:
+    """One-dict summary of a run for the CLI (SI units, JSON-ready); ``flat_tol`` in rad."""
     names, _, theta = hinge_angles(model, result)
-    report = hinge_release_report(model, result)
+    report = hinge_release_report(model, result, flat_tol=flat_tol)
     return {
         "success": bool(result.success), "message": result.message, "method": result.method,
         "t_end": float(result.t[-1]), "time_to_flat": report["flat_at"],

@@ -18,8 +18,8 @@ import numpy as np
 from ..dynamics.report import FLAT_TOL, hinge_angles
 from ..errors import OptimisationError
 
-#: Largest |theta| (rad) of every hinge at which the array counts as flat; the
-#: dynamics' release report uses the same value for "reached flat".
+#: Default largest |theta| (rad) of every hinge at which the array counts as
+#: flat: the scene's ``simulation.flat_tolerance`` unless the scene sets it.
 FLAT_TOLERANCE = FLAT_TOL
 
 #: Approach speed (m/s) charged to a run whose simulation failed: faster than
@@ -46,7 +46,7 @@ class Outcome:
     flat_residual : float
         How close the valid part of the run came to flat: the smallest, over
         its samples, of the largest |theta| of any hinge (cut hinges included),
-        rad. At most :data:`FLAT_TOLERANCE` when the array reached flat.
+        rad. At most ``flat_tolerance`` when the array reached flat.
     first_collision : dict or None
         ``t`` (s), ``pair`` (two body names) and whatever else the
         collision check reports, as plain YAML-able values.
@@ -58,6 +58,9 @@ class Outcome:
     t_stop : float
         Last simulated instant, s: the sample that revealed the first
         collision, the first flat sample, or the end time.
+    flat_tolerance : float
+        The largest |theta| at which the run counted as flat, rad (the
+        scene's ``simulation.flat_tolerance``).
     """
 
     collided: bool
@@ -69,11 +72,12 @@ class Outcome:
     message: str = ""
     wall_time: float = 0.0
     t_stop: float = math.nan
+    flat_tolerance: float = FLAT_TOLERANCE
 
     @property
     def reached_flat(self) -> bool:
-        """The array lay flat at some sample (every |theta| <= :data:`FLAT_TOLERANCE`)."""
-        return self.simulated and self.flat_residual <= FLAT_TOLERANCE
+        """The array lay flat at some sample (every |theta| <= ``flat_tolerance``)."""
+        return self.simulated and self.flat_residual <= self.flat_tolerance
 
     @property
     def feasible(self) -> bool:
@@ -105,8 +109,9 @@ class Evaluation:
 def objective(outcome: Outcome, p: float, q: float, flat_weight: float) -> float:
     """Score of one run: the paper's Eq. (8) plus a flat term.
 
-    ``f = p v - q d + flat_weight * max(0, r - FLAT_TOLERANCE)`` with ``r``
-    the outcome's flat residual: how close to flat the valid run came (rad).
+    ``f = p v - q d + flat_weight * max(0, r - tol)`` with ``r`` the
+    outcome's flat residual, how close to flat the valid run came, and
+    ``tol`` its ``flat_tolerance`` (rad).
     Eq. (8) cannot see a deployment that locks (a hinge that never leaves its
     stowed angle may keep all panels far apart, which Eq. (8) rewards); the
     flat term charges it in proportion to how far from flat it stays, and
@@ -130,7 +135,7 @@ def objective(outcome: Outcome, p: float, q: float, flat_weight: float) -> float
     if not outcome.simulated:
         return p * FAILED_SPEED + flat_weight * math.pi
     d = outcome.d if outcome.feasible else 0.0
-    return p * outcome.v - q * d + flat_weight * max(0.0, outcome.flat_residual - FLAT_TOLERANCE)
+    return p * outcome.v - q * d + flat_weight * max(0.0, outcome.flat_residual - outcome.flat_tolerance)
 
 
 def plain(value):
@@ -186,7 +191,7 @@ def run_deployment(model, settings) -> Outcome:
     result = None
     for result in simulate_segments(model, sim, segment_samples=SEGMENT_SAMPLES):
         spread = np.max(np.abs(hinge_angles(model, result)[2]), axis=1)
-        flat = np.flatnonzero(spread <= FLAT_TOLERANCE)
+        flat = np.flatnonzero(spread <= sim.flat_tolerance)
         block = result.head(flat[0] + 1) if len(flat) else result
         n_before = check.checked
         check.feed(block, poses=True)
@@ -207,7 +212,8 @@ def run_deployment(model, settings) -> Outcome:
         simulated=bool(result.success),
         message=result.message,
         wall_time=time.perf_counter() - start,
-        t_stop=float(report.t[-1]) if len(report.t) else math.nan)
+        t_stop=float(report.t[-1]) if len(report.t) else math.nan,
+        flat_tolerance=sim.flat_tolerance)
 
 
 def evaluate(model, k, settings, *, c=None, evaluation=run_deployment) -> Evaluation:

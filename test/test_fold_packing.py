@@ -1,6 +1,5 @@
 """Two-stack packing: verdicts, the paper's package, an independent verifier."""
 
-import itertools
 import math
 
 import numpy as np

@@ -40,12 +40,37 @@ def simulate_scene(scene, stiffness_file=None):
     return model, result, report
 
 
+def damping_note(model, stiffness_file):
+    """Say on stderr when a result file's damping is not the one simulated.
+
+    The scene decides c/k (so that ``--set hinges.damping_ratio=...`` tries a
+    design under other dampers); a result optimised under another ratio then
+    deploys differently, which deserves a word rather than silence.
+    """
+    import sys
+
+    import numpy as np
+
+    from .optimise import load_damping
+    c_file = load_damping(stiffness_file, model)
+    c = np.array([h.c for h in model.hinges])
+    if c_file is None or np.allclose(c_file, c, rtol=1e-6, atol=0.0):
+        return
+    k = model.stiffness
+    ratio = lambda cc: float(np.median(cc[k > 0] / k[k > 0]))  # noqa: E731
+    print(f"panel-deploy: note: {stiffness_file} gives damping c/k = {ratio(c_file):.4g} s, "
+          f"the scene {ratio(c):.4g} s; simulating with the scene's (--set "
+          f"hinges.damping_ratio={ratio(c_file):.4g} simulates the result's)", file=sys.stderr)
+
+
 def simulate_command(args, scene) -> int:
     """``panel-deploy simulate``: print the summary; exit 0 when the run succeeded, 1 if not."""
     from .summary import deployment_summary, summary_text
 
     scene = apply_overrides(scene, args)
     model, result, report = simulate_scene(scene, args.stiffness)
+    if args.stiffness:
+        damping_note(model, args.stiffness)
     if args.out:
         from .trajectory_io import save_trajectory
         save_trajectory(args.out, result, scene, model)

@@ -96,6 +96,13 @@ def test_simulate_takes_stiffness_from_a_result_file(capsys, tmp_path):
                      "--stiffness", str(stiff), "--out", str(out_file))
     assert code == 0
     assert np.allclose(load_trajectory(out_file)[2], [k[n] for n in names])
+    # A result optimised under other dampers: simulated with the scene's, and said so.
+    for beta, noted in ((0.043, False), (0.19, True)):
+        stiff.write_text("hinges:\n" + "".join(f"  {n}: {{k: {v}, c: {beta * v}}}\n"
+                                               for n, v in k.items()))
+        code, _, err = run(capsys, "simulate", PAPER, "--t-end", "0.004", "--method", "compiled",
+                           "--stiffness", str(stiff))
+        assert code == 0 and ("c/k = 0.19 s, the scene 0.043 s" in err) == noted, err
     stiff.write_text("hinges: {r1c1-r1c2: -1}\n")
     code, _, err = run(capsys, "simulate", PAPER, "--t-end", "0.004", "--stiffness", str(stiff))
     assert code == 2 and "stiffness file" in err and len(err.strip().splitlines()) == 1

@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from panel_deploy.errors import OptimisationError
-from panel_deploy.optimise import (Outcome, load_stiffness, optimise, save_result, snap_to_springs,
+from panel_deploy.optimise import (Outcome, load_damping, load_stiffness, optimise, save_result, snap_to_springs,
                                    soft_hinges, tolerance_check, verify)
 from test_optimise_search import bowl_outcome, chain_model, scene
 
@@ -38,6 +38,7 @@ def test_result_file_round_trip(tmp_path):
     assert data["initial"]["f"] == pytest.approx(res.initial.f)
     np.testing.assert_array_equal(load_stiffness(path, model), res.k)
     assert [data["hinges"][h.name]["c"] for h in model.hinges] == pytest.approx(list(res.c))
+    np.testing.assert_array_equal(load_damping(path, model), res.c)
 
 
 @pytest.mark.parametrize("content, expected", [
@@ -63,6 +64,15 @@ def test_plain_mapping_file_loads(tmp_path):
     path = tmp_path / "k.yaml"
     path.write_text("hinges: {h0: 0.02, h1: 0, h2: {k: 0.2}}")
     np.testing.assert_array_equal(load_stiffness(path, chain_model()), [0.02, 0.0, 0.2])
+    assert load_damping(path, chain_model()) is None   # no c given: damping follows k
+
+
+def test_damping_given_for_some_hinges_only_names_the_first_without(tmp_path):
+    path = tmp_path / "k.yaml"
+    path.write_text("hinges: {h0: {k: 0.1, c: 0.004}, h1: 0.1, h2: {k: 0.1, c: 0.004}}")
+    with pytest.raises(OptimisationError, match=r"hinges\.h1\.c: expected a finite number >= 0 "
+                                                r"N m s/rad, got None"):
+        load_damping(path, chain_model())
 
 
 def test_soft_hinges_are_ten_times_softer_than_all_the_rest():

@@ -96,6 +96,19 @@ def load_stiffness(path, model) -> np.ndarray:
     OptimisationError
         ``stiffness file ...`` naming the file and the offending entry.
     """
+    return _hinge_values(path, model, "k")
+
+
+def load_damping(path, model) -> np.ndarray | None:
+    """Hinge damping (N m s/rad) from a result file, or None if it gives no ``c``.
+
+    As :func:`load_stiffness`; a file that gives ``c`` must give it for every hinge.
+    """
+    return _hinge_values(path, model, "c")
+
+
+def _hinge_values(path, model, key):
+    """``hinges.<name>.<key>`` of every hinge of ``model`` (a bare number is k)."""
     where = f"stiffness file {str(path)!r}"
     try:
         data = yaml.safe_load(Path(path).read_text())
@@ -115,13 +128,17 @@ def load_stiffness(path, model) -> np.ndarray:
                                 f"(hinges are: {', '.join(names)})")
     if missing:
         raise OptimisationError(f"{where}: hinges: missing {', '.join(missing)}")
-    k = np.empty(len(names))
-    for i, name in enumerate(names):
-        entry = given[name]
-        value = entry.get("k") if isinstance(entry, dict) else entry
+    entries = [given[name] if isinstance(given[name], dict) else {"k": given[name]}
+               for name in names]
+    if key != "k" and not any(key in e for e in entries):
+        return None
+    out = np.empty(len(names))
+    unit = "N m/rad" if key == "k" else "N m s/rad"
+    for i, (name, entry) in enumerate(zip(names, entries)):
+        value = entry.get(key)
         if isinstance(value, bool) or not isinstance(value, (int, float)) \
                 or not math.isfinite(value) or value < 0:
-            raise OptimisationError(f"{where}: hinges.{name}.k: expected a finite number >= 0 "
-                                    f"N m/rad, got {value!r}")
-        k[i] = value
-    return k
+            raise OptimisationError(f"{where}: hinges.{name}.{key}: expected a finite number >= 0 "
+                                    f"{unit}, got {value!r}")
+        out[i] = value
+    return out

@@ -14,7 +14,7 @@ from scipy.integrate import solve_ivp
 
 from panel_deploy.dynamics import simulate
 from panel_deploy.collision import check_trajectory
-from panel_deploy.optimise import FLAT_TOLERANCE, evaluate, objective, optimise, verify
+from panel_deploy.optimise import FLAT_TOLERANCE, Outcome, evaluate, objective, optimise, verify
 from panel_deploy.scene import SimulationSection
 from test_optimise_search import A, MASS, T, chain_model, scene
 
@@ -127,6 +127,21 @@ def test_the_scenes_flat_tolerance_decides_when_the_run_is_flat():
     tight = evaluate(model, [0.2], s.replace(simulation=replace(s.simulation, flat_tolerance=0.05)))
     assert not tight.outcome.reached_flat
     assert tight.f == pytest.approx(tight.outcome.flat_residual - 0.05)
+
+
+def near_flat(model, settings):
+    """An evaluation hook that leaves flat_tolerance at its default."""
+    return Outcome(collided=False, v=0.0, d=0.01, flat_residual=0.08)
+
+
+def test_a_hooks_outcome_is_judged_by_the_scenes_flat_tolerance():
+    for tol, flat in ((0.05, False), (0.1, True)):
+        s = short_scene(0.1)
+        ev = evaluate(chain_model(2, beta=BETA), [0.1],
+                      s.replace(simulation=replace(s.simulation, flat_tolerance=tol)),
+                      evaluation=near_flat)
+        assert ev.outcome.reached_flat == flat
+        assert ev.f == pytest.approx(-0.1 if flat else 0.08 - tol)
 
 
 def test_a_colliding_run_earns_no_clearance_on_the_paper_scene():

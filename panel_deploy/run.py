@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import sys
 from dataclasses import replace
+
+import numpy as np
 
 from .errors import SceneError
 
@@ -47,17 +50,17 @@ def damping_note(model, stiffness_file):
     design under other dampers); a result optimised under another ratio then
     deploys differently, which deserves a word rather than silence.
     """
-    import sys
-
-    import numpy as np
-
     from .optimise import load_damping
+
     c_file = load_damping(stiffness_file, model)
     c = np.array([h.c for h in model.hinges])
-    if c_file is None or np.allclose(c_file, c, rtol=1e-6, atol=0.0):
+    sprung = model.stiffness > 0
+    if c_file is None or not sprung.any() or np.allclose(c_file, c, rtol=1e-6, atol=0.0):
         return
-    k = model.stiffness
-    ratio = lambda cc: float(np.median(cc[k > 0] / k[k > 0]))  # noqa: E731
+
+    def ratio(damping):
+        return float(np.median(damping[sprung] / model.stiffness[sprung]))
+
     print(f"panel-deploy: note: {stiffness_file} gives damping c/k = {ratio(c_file):.4g} s, "
           f"the scene {ratio(c):.4g} s; simulating with the scene's (--set "
           f"hinges.damping_ratio={ratio(c_file):.4g} simulates the result's)", file=sys.stderr)

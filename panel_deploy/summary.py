@@ -6,21 +6,18 @@ this module only puts them together for the CLI (and later the nodes).
 
 from __future__ import annotations
 
-from .dynamics import hinge_release_report, summary
+from .dynamics import summary
 from .dynamics.report import FLAT_TOL
 
 
 def deployment_summary(model, result, collision=None, *, flat_tol=FLAT_TOL) -> dict:
-    """Dynamics summary + hinge release times + closure + collision, JSON-ready.
+    """Dynamics summary (hinge release times included) + closure + collision, JSON-ready.
 
     ``flat_tol`` (rad): the scene's ``simulation.flat_tolerance``.
     """
     out = summary(model, result, flat_tol=flat_tol)
-    releases = hinge_release_report(model, result, flat_tol=flat_tol)
     out.update(status=int(result.status),
-               closure=model.closure.method if model.cut_hinges else "none",
-               release_times={n: h["released_at"] for n, h in releases["hinges"].items()},
-               flat_tolerance=releases["flat_tol"])
+               closure=model.closure.method if model.cut_hinges else "none")
     if collision is not None:
         out["collision"] = collision.to_dict()
     return out

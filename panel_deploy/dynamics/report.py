@@ -69,7 +69,9 @@ def summary(model: Model, result: SimulationResult, *, flat_tol=FLAT_TOL) -> dic
     return {
         "success": bool(result.success), "message": result.message, "method": result.method,
         "t_end": float(result.t[-1]), "time_to_flat": report["flat_at"],
+        "flat_tolerance": flat_tol,
         "final_angles": dict(zip(names, map(float, theta[-1]))),
+        "release_times": {n: h["released_at"] for n, h in report["hinges"].items()},
         "locked_hinges": report["locked"],
         "energy_balance_error": float(energy_balance_error(result).max()),
         "max_constraint_gap": float(result.constraint_gap.max()),

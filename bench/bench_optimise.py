@@ -58,13 +58,15 @@ def seed_list(text):
 def report(model, scene, res, wall, check, sets):
     """Everything about one search (the single-seed output)."""
     print()
-    print(f"scene {scene.name}{' with ' + ', '.join(sets) if sets else ''}: {len(model.hinges)} hinges in {res.problem.n} groups, "
-          f"bounds {res.problem.bounds} N m/rad, method {res.method}")
+    print(f"scene {scene.name}{' with ' + ', '.join(sets) if sets else ''}: {len(model.hinges)} hinges in "
+          f"{len(res.problem.groups)} groups, bounds {res.problem.bounds} N m/rad, method {res.method}")
     describe("K_0    ", res.initial)
     describe("optimum", res.best)
     print(f"status {res.status}: {res.message}")
     for names, idx in zip(res.problem.group_names(), res.problem.groups):
         print(f"  k = {res.k[idx[0]]:.4f} N m/rad  {', '.join(names)}")
+    if res.problem.damping_variable:
+        print(f"  c/k = {res.c[0] / res.k[0]:.4f} s (searched within {res.problem.damping_bounds} s)")
     ratio = res.k / res.k.max()
     print("  k / max k per hinge: " + ", ".join(f"{h.name} {r:.3f}"
                                                 for h, r in zip(model.hinges, ratio)))
@@ -106,14 +108,15 @@ def main(argv=None):
                        progress=None if args.seeds else print_progress)
         wall = time.perf_counter() - start
         walls.append(wall)
-        check = verify(model, res.k, scene, tighten=TIGHTEN, refine=REFINE)
+        check = verify(model, res.k, scene, tighten=TIGHTEN, refine=REFINE, c=res.c)
         confirmed = res.success and check.outcome.feasible
         if not args.seeds:
             report(model, scene, res, wall, check, args.set)
         else:
             first = (f"first feasible after {res.first_feasible[0]} evaluations, "
                      f"{res.first_feasible[1]:.1f} s" if res.first_feasible else "no feasible K")
-            print(f"seed {seed:3d}: f = {res.f:+.4f}, {first}; {res.nfev} evaluations, "
+            damping = f", c/k {res.c[0] / res.k[0]:.3f} s" if res.problem.damping_variable else ""
+            print(f"seed {seed:3d}: f = {res.f:+.4f}{damping}, {first}; {res.nfev} evaluations, "
                   f"{wall:.1f} s; re-check {'confirms' if confirmed else 'does not confirm' if res.success else '-'}",
                   flush=True)
             if confirmed:

@@ -265,6 +265,10 @@ class OptimisationSection:
     flat_weight: float = spec(1.0, number(0.0), "1/rad", "weight of how far from flat the run stays (its closest approach: the smallest, over samples, of the largest |theta|)")
     bounds: tuple = spec((0.001, 0.2), _bounds, "N m/rad", "lower and upper stiffness bound")
     k0: float = spec(0.1, number(0, low_open=True), "N m/rad", "starting stiffness K_0")
+    damping_ratio_bounds: tuple = spec(None, optional(_bounds), "s",
+                                       "lower and upper c/k when one damping ratio for all hinges "
+                                       "(a lubricant, paper section 5) is searched for too; null "
+                                       "keeps hinges.damping_ratio, which is the start otherwise")
     method: str = spec("local", choice("local", "global"), "", "local (scipy minimize) or global (differential evolution)")
     restarts: int = spec(3, integer(0), "", "restarts from new K_0 while collisions remain")
     max_evaluations: int = spec(200, integer(1), "", "simulation budget")
@@ -363,6 +367,17 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     lo, hi = opt.bounds
     if not lo <= opt.k0 <= hi:
         raise SceneError("optimisation.k0", f"{opt.k0:g} is outside bounds [{lo:g}, {hi:g}]")
+    if opt.damping_ratio_bounds is not None:
+        lo, hi = opt.damping_ratio_bounds
+        beta = sections["hinges"].damping_ratio
+        if not 0 < lo < hi:
+            raise SceneError("optimisation.damping_ratio_bounds",
+                             f"expected 0 < lower < upper (s, searched in log scale), got "
+                             f"[{lo:g}, {hi:g}]")
+        if not lo <= beta <= hi:
+            raise SceneError("optimisation.damping_ratio_bounds",
+                             f"the search starts from hinges.damping_ratio = {beta:g} s, which is "
+                             f"outside [{lo:g}, {hi:g}]")
     gravity = vector3(data["gravity"], "gravity") if "gravity" in data else Scene.gravity
     for key in ("name", "description"):
         if key in data and not isinstance(data[key], str):

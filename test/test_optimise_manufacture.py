@@ -126,5 +126,10 @@ def test_tolerance_check_counts_the_perturbed_copies():
     assert len(wide.evaluations) == 30
     assert wide.collision_free == sum(inside) < 30
     assert all(np.all(np.abs(e.k / 0.05 - 1) <= 0.1) for e in wide.evaluations)
+    # Given damping replaces the model's c/k: 0.2 k lies outside the band.
+    damped = tolerance_check(model, [0.05] * 3, scene(), c=[0.2 * 0.05] * 3, n=3, stiffness_tol=0.0,
+                             damping_tol=0.0, workers=1, evaluation=band_outcome)
+    assert damped.collision_free == 0
+    np.testing.assert_allclose(damped.evaluations[0].c, 0.2 * 0.05)
     with pytest.raises(OptimisationError, match="^stiffness_tol: "):
         tolerance_check(model, [0.05] * 3, scene(), stiffness_tol=1.5, evaluation=band_outcome)

@@ -187,3 +187,29 @@ def test_optimise_command_succeeds_only_if_the_re_check_agrees(monkeypatch, caps
     data = json.loads(captured.out)
     assert data["success"] and not data["verification"]["reached_flat"]
     assert "re-check" in captured.err and "never flat" in captured.err
+
+
+def test_optimise_command_re_checks_the_damping_the_search_chose(monkeypatch, capsys):
+    # The stand-in is collision-free only for c/k within its band, far from the model's
+    # 0.043 s: the re-check and the tolerance check must simulate the optimum's own
+    # damping, or they collide.
+    import functools
+    import json
+    from types import SimpleNamespace
+
+    from panel_deploy.optimise import command
+    from test_optimise_search import DAMPED_BAND, damped_outcome
+
+    monkeypatch.setattr("panel_deploy.build.build_model", lambda scene: chain_model(beta=BETA))
+    for name in ("optimise", "verify", "tolerance_check"):
+        monkeypatch.setattr(command, name,
+                            functools.partial(getattr(command, name), evaluation=damped_outcome))
+    s = scene(method="global", max_evaluations=200, seed=2, damping_ratio_bounds=[0.01, 0.5])
+    args = SimpleNamespace(quiet=True, json=True, workers=1, perturb=5, perturb_tol=0.01)
+    assert command.optimise_command(args, s) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert DAMPED_BAND[0] <= data["damping_ratio"] <= DAMPED_BAND[1]
+    assert data["damping_ratio_bounds"] == [0.01, 0.5]
+    assert data["verification"]["collision"] is None and data["verification"]["reached_flat"]
+    # Copies within +-1 % in k and c keep c/k within ~2 %: most stay in the band.
+    assert data["tolerance"]["collision_free"] >= 1

@@ -68,6 +68,22 @@ def plateau_outcome(model, settings):
                    flat_residual=0.0)
 
 
+# Stand-in for a design that needs damping: collision-free only for c/k within
+# DAMPED_BAND (s), where the bowl's clearance applies; elsewhere it collides, the
+# faster the further c/k lies from the band (in log c/k).
+DAMPED_BAND = (0.15, 0.25)
+
+
+def damped_outcome(model, settings):
+    h = model.hinges[0]
+    beta = h.c / h.k
+    miss = max(0.0, np.log10(DAMPED_BAND[0] / beta), np.log10(beta / DAMPED_BAND[1]))
+    if miss > 0:
+        return Outcome(collided=True, v=miss, d=0.0, flat_residual=0.0,
+                       first_collision={"t": 0.3, "pair": ["P0", "P2"]})
+    return bowl_outcome(model, settings)
+
+
 def test_objective_is_eq8_plus_flat_term():
     o = Outcome(collided=True, v=0.2, d=0.0, flat_residual=0.0)
     assert objective(o, 2.0, 10.0, 1.0) == pytest.approx(0.4)
@@ -112,6 +128,38 @@ def test_groups_share_one_stiffness():
     assert res.problem.groups == ((0, 2), (1,))
     # Best shared value is the mean of the two targets in log k.
     assert np.log10(res.k[0]) == pytest.approx((TARGET[0] + TARGET[2]) / 2, abs=0.05)
+
+
+def test_damping_ratio_bounds_add_one_shared_variable():
+    model = chain_model(beta=0.043)
+    problem = StiffnessProblem.from_model(model, (0.001, 0.2), 0.1, damping_bounds=(0.01, 0.5))
+    assert problem.n == 4 and problem.damping_variable
+    np.testing.assert_allclose(problem.x0, np.log10([0.1, 0.1, 0.1, 0.043]))
+    np.testing.assert_allclose(problem.x_bounds[-1], np.log10([0.01, 0.5]))
+    x = np.log10([0.01, 0.05, 0.2, 0.2])
+    np.testing.assert_allclose(problem.k_of(x), [0.01, 0.05, 0.2])
+    np.testing.assert_allclose(problem.c_of(x), 0.2 * np.array([0.01, 0.05, 0.2]))
+    np.testing.assert_allclose(problem.x_of(problem.k_of(x), problem.c_of(x)), x)
+    with pytest.raises(OptimisationError, match="^c: "):
+        problem.x_of(problem.k_of(x))
+    fixed = StiffnessProblem.from_model(model, (0.001, 0.2), 0.1)
+    assert fixed.n == 3 and not fixed.damping_variable
+    np.testing.assert_allclose(fixed.c_of(x[:3]), 0.043 * fixed.k_of(x[:3]))
+
+
+@pytest.mark.parametrize("method", ["local", "global"])
+def test_search_chooses_the_damping_ratio_when_it_is_a_variable(method):
+    s = scene(method=method, max_evaluations=200, seed=2, damping_ratio_bounds=[0.01, 0.5])
+    res = optimise(chain_model(beta=0.043), s, workers=1, evaluation=damped_outcome)
+    assert res.initial.outcome.collided  # the model's 0.043 s lies outside the band
+    assert res.success and res.problem.damping_variable
+    beta = res.c / res.k
+    np.testing.assert_allclose(beta, beta[0])  # one lubricant for every hinge
+    assert DAMPED_BAND[0] <= beta[0] <= DAMPED_BAND[1]
+    # With c/k fixed at the model's, no K is collision-free.
+    fixed = optimise(chain_model(beta=0.043), scene(method=method, max_evaluations=60, seed=2),
+                     workers=1, evaluation=damped_outcome)
+    assert not fixed.success and fixed.outcome.collided
 
 
 def test_restart_leaves_a_colliding_plateau():
@@ -186,12 +234,16 @@ def test_process_pool_gives_the_serial_result():
     ({"groups": [[0, 1], [1, 2]]}, "groups[1]"),
     ({"groups": [[7]]}, "groups[0]"),
     ({"k0": [0.1, 0.05, 0.2], "groups": [["h0", "h2"]]}, "k0"),
+    ({"damping_bounds": (0.0, 0.3)}, "damping_ratio_bounds"),
+    ({"damping_bounds": (0.3, 0.01)}, "damping_ratio_bounds"),
+    ({"damping_bounds": (0.1, 0.3)}, "damping_ratio_bounds"),  # the start, 0.043 s, is outside
 ])
 def test_bad_problem_names_the_field(kwargs, field):
     model = chain_model()
     args = {"bounds": (0.001, 0.2), "k0": 0.1, **kwargs}
     with pytest.raises(OptimisationError, match="^" + re.escape(field) + ": "):
-        StiffnessProblem.from_model(model, args["bounds"], args["k0"], args.get("groups"))
+        StiffnessProblem.from_model(model, args["bounds"], args["k0"], args.get("groups"),
+                                    args.get("damping_bounds"))
 
 
 def test_bad_options_raise_before_any_evaluation():

@@ -53,13 +53,15 @@ def optimise_command(args, scene) -> int:
         else:
             print(dump_result(result, scene.name, extra), end="")
         return 130
-    check = verify(model, result.k, scene)
+    check = verify(model, result.k, scene, c=result.c)
     extra["verification"] = {"tighten": 10.0, "refine": 2, **check.summary()}
     springs = arg("springs")
     if springs:
         values = [float(s) for s in springs.split(",")] if isinstance(springs, str) else springs
         snap = snap_to_springs(result.k, values)
-        built = verify(model, snap.k, scene, tighten=1.0, refine=1)
+        # Each hinge keeps the optimum's c/k (its lubricant) on the snapped spring.
+        built = verify(model, snap.k, scene, tighten=1.0, refine=1,
+                       c=result.c / result.k * snap.k)
         extra["manufacture"] = {
             "springs": values,
             "hinges": {name: {"k": float(k), "springs": list(s), "zeroed": bool(z)}
@@ -69,8 +71,8 @@ def optimise_command(args, scene) -> int:
     n = arg("perturb")
     if n:
         tol = arg("perturb_tol") or 0.05
-        report = tolerance_check(model, result.k, scene, n=n, stiffness_tol=tol, damping_tol=tol,
-                                 workers=arg("workers"), dask_address=arg("dask"))
+        report = tolerance_check(model, result.k, scene, c=result.c, n=n, stiffness_tol=tol,
+                                 damping_tol=tol, workers=arg("workers"), dask_address=arg("dask"))
         extra["tolerance"] = report.to_dict()
     out = arg("out")
     if out:

@@ -8,6 +8,9 @@ Format (``format: panel_deploy.stiffness/1``)::
       h_1_1-1_2: {k: 0.0123, c: 0.000529}
       ...
     groups: [[h_1_1-1_2, h_1_3-1_4], ...]
+    bounds: [0.001, 0.2]         # N m/rad
+    damping_ratio: 0.043         # s, c/k of the result (median over sprung hinges)
+    damping_ratio_bounds: null   # s, [lower, upper] if c/k was searched for too
     f: -0.21                     # objective, Eq. (8) + flat term
     v: 0.0                       # m/s, approach speed at the first collision
     d: 0.021                     # m, smallest proximal distance
@@ -47,7 +50,10 @@ def result_to_dict(result, scene_name: str = "", extra: dict | None = None) -> d
            "hinges": {n: {"k": float(k), "c": float(c)}
                       for n, k, c in zip(names, result.k, result.c)},
            "groups": result.problem.group_names(),
-           "bounds": [float(b) for b in result.problem.bounds]}
+           "bounds": [float(b) for b in result.problem.bounds],
+           "damping_ratio": float(np.median(result.c / result.k)),
+           "damping_ratio_bounds": None if result.problem.damping_bounds is None
+           else [float(b) for b in result.problem.damping_bounds]}
     out.update(result.best.summary())
     out["initial"] = result.initial.summary() if result.initial is not None else None
     out.update(success=bool(result.success), status=int(result.status), message=result.message,

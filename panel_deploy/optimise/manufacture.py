@@ -148,14 +148,16 @@ class ToleranceReport:
                 "feasible": self.feasible}
 
 
-def tolerance_check(model, k, settings, *, n=20, stiffness_tol=0.05, damping_tol=0.05, seed=0,
-                    workers=None, dask_address=None, evaluation=run_deployment) -> ToleranceReport:
+def tolerance_check(model, k, settings, *, c=None, n=20, stiffness_tol=0.05, damping_tol=0.05,
+                    seed=0, workers=None, dask_address=None,
+                    evaluation=run_deployment) -> ToleranceReport:
     """Re-simulate ``n`` copies of K with every k and c off by up to the tolerances.
 
-    Each hinge gets ``k (1 + e_k)`` and ``beta k (1 + e_c)`` with e_k, e_c
+    Each hinge gets ``k (1 + e_k)`` and ``c (1 + e_c)`` with e_k, e_c
     drawn uniformly from ``[-stiffness_tol, stiffness_tol]`` and
-    ``[-damping_tol, damping_tol]`` (beta = the model's c/k). Runs on the
-    same backends as :func:`~panel_deploy.optimise.search.optimise`.
+    ``[-damping_tol, damping_tol]``; ``c`` (N m s/rad, per hinge) defaults
+    to beta k with beta the model's c/k. Runs on the same backends as
+    :func:`~panel_deploy.optimise.search.optimise`.
     """
     if not isinstance(n, int) or n < 1:
         raise OptimisationError(f"n: expected an integer >= 1, got {n!r}")
@@ -163,7 +165,7 @@ def tolerance_check(model, k, settings, *, n=20, stiffness_tol=0.05, damping_tol
         if not 0 <= tol < 1:
             raise OptimisationError(f"{name}: expected a fraction in [0, 1), got {tol!r}")
     k = np.asarray(k, dtype=float)
-    c = damping_ratio(model) * k
+    c = damping_ratio(model) * k if c is None else np.asarray(c, dtype=float)
     rng = np.random.default_rng(seed)
     ks = [k * (1 + rng.uniform(-stiffness_tol, stiffness_tol, k.shape)) for _ in range(n)]
     cs = [c * (1 + rng.uniform(-damping_tol, damping_tol, c.shape)) for _ in range(n)]

@@ -1,7 +1,8 @@
 """Stiffness optimisation, paper section 3.3 and Fig. 4.
 
 Local search: L-BFGS-B (bounded quasi-Newton; the paper used fmincon's
-interior-reflective Newton method) on x = log10 k per hinge group, restarted
+interior-reflective Newton method) on x = log10 k per hinge group (and
+log10 c/k, when the damping ratio is a variable), restarted
 from a new random K_0 while the best K still collides or does not reach
 flat. Global search: differential evolution seeded with K_0, then the local
 search from its best point.
@@ -29,7 +30,7 @@ import numpy as np
 from scipy.optimize import differential_evolution, minimize
 
 from ..errors import OptimisationError
-from .evaluate import Evaluation, damping_ratio, run_deployment
+from .evaluate import Evaluation, run_deployment
 from .parallel import BudgetExhausted, Evaluator, Job, make_backend
 from .problem import StiffnessProblem
 
@@ -123,15 +124,19 @@ def optimise(model, settings, *, workers=None, dask_address=None, progress: Call
 
     Minimises f(K) of :func:`~panel_deploy.optimise.evaluate.objective`
     (Eq. (8) plus a term for not reaching flat) over one stiffness per hinge
-    group, with c following k (Rayleigh damping).
+    group, with c following k (Rayleigh damping): c = beta k with the
+    model's beta, or with one beta for all hinges searched within
+    ``optimisation.damping_ratio_bounds`` when the scene gives them.
 
     Parameters
     ----------
     model : Model
-        Base model; its c/k ratios set the damping.
+        Base model; its c/k ratios set the damping (or the start c/k, when
+        the damping ratio is a variable).
     settings : Scene
-        ``optimisation`` gives p, q, flat_weight, bounds, k0, method,
-        restarts, max_evaluations, workers, seed, rtol, refine;
+        ``optimisation`` gives p, q, flat_weight, bounds, k0,
+        damping_ratio_bounds, method, restarts, max_evaluations, workers,
+        seed, rtol, refine;
         ``simulation`` and ``collision``, as :func:`search_settings`
         adjusts them, are used for every evaluation.
     workers : int, optional
@@ -183,8 +188,7 @@ def optimise(model, settings, *, workers=None, dask_address=None, progress: Call
     if not fd_step > 0:
         raise OptimisationError(f"fd_step: expected a step > 0 in log10 k, got {fd_step!r}")
     problem = StiffnessProblem.from_model(model, opt.bounds, opt.k0 if k0 is None else k0,
-                                          groups)
-    damping_ratio(model)  # fail now, not in a worker, if c/k is unknown
+                                          groups, opt.damping_ratio_bounds)
     rng = np.random.default_rng(opt.seed if seed is None else seed)
     backend = make_backend(Job(model, search_settings(settings), evaluation),
                            opt.workers if workers is None else workers, dask_address)
@@ -249,7 +253,8 @@ class _Search:
         self.nit += 1
 
     def _batch(self, xs) -> list:
-        return self.evaluator.map([self.problem.k_of(x) for x in xs])
+        return self.evaluator.map([self.problem.k_of(x) for x in xs],
+                                  [self.problem.c_of(x) for x in xs])
 
     def fun_and_grad(self, x):
         """f(x) and its forward-difference gradient, as one parallel batch."""
@@ -291,21 +296,21 @@ class _Search:
         def batch(xs):
             return np.array([e.f for e in self._batch(np.atleast_2d(xs.T))])
 
-        differential_evolution(batch, self.problem.x_bounds, x0=np.log10(self.problem.k0),
+        differential_evolution(batch, self.problem.x_bounds, x0=self.problem.x0,
                                popsize=popsize, maxiter=generations, vectorized=True,
                                updating="deferred", polish=False, tol=1e-3,
                                rng=rng, callback=self._iterated)
 
     def run(self, method, restarts, rng, popsize) -> bool:
         """Fig. 4: search, restart while no feasible K; True if the last local search converged."""
-        x0 = np.log10(self.problem.k0)
+        x0 = self.problem.x0
         converged = False
         try:
             self.phase = "K_0"
             self.initial = self._batch([x0])[0]
             if method == "global":
                 self.global_(rng, popsize)
-                x0 = self.problem.x_of(self.evaluator.best.k)
+                x0 = self.problem.x_of(self.evaluator.best.k, self.evaluator.best.c)
             for attempt in range(restarts + 1):
                 if attempt:
                     lo, hi = np.array(self.problem.x_bounds).T

@@ -156,6 +156,9 @@ def test_search_chooses_the_damping_ratio_when_it_is_a_variable(method):
     beta = res.c / res.k
     np.testing.assert_allclose(beta, beta[0])  # one lubricant for every hinge
     assert DAMPED_BAND[0] <= beta[0] <= DAMPED_BAND[1]
+    # The line search in c/k along K_0 (at most 20 evaluations) reaches the band.
+    n, _ = res.first_feasible
+    assert n <= 21 and np.allclose(res.history[n - 1].k, 0.1)
     # With c/k fixed at the model's, no K is collision-free.
     fixed = optimise(chain_model(beta=0.043), scene(method=method, max_evaluations=60, seed=2),
                      workers=1, evaluation=damped_outcome)

@@ -82,7 +82,9 @@ def optimise_command(args, scene) -> int:
     elif not out:
         print(dump_result(result, scene.name, extra), end="")
     else:
-        print(f"{result.message}: f = {result.f:.5f}, nfev {result.nfev}, "
+        damping = (f", c/k {result.c[0] / result.k[0]:.4g} s" if result.problem.damping_variable
+                   else "")
+        print(f"{result.message}: f = {result.f:.5f}{damping}, nfev {result.nfev}, "
               f"{result.wall_time:.1f} s -> {out}")
     if out and not arg("json", False):
         print(recheck_verdict(check))

@@ -146,9 +146,8 @@ class StiffnessProblem:
         """x of a per-hinge (or per-group) K and, if the damping ratio is a
         variable, its damping ``c`` (same shape as ``k``; its median c/k)."""
         k = np.asarray(k, dtype=float)
-        groups = len(self.groups)
-        pick = k.shape == (groups,)
-        x = np.log10(k if pick else np.array([k[idx[0]] for idx in self.groups]))
+        kg = k if k.shape == (len(self.groups),) else np.array([k[idx[0]] for idx in self.groups])
+        x = np.log10(kg)
         if not self.damping_variable:
             return x
         if c is None:

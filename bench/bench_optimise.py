@@ -66,7 +66,10 @@ def report(model, scene, res, wall, check, sets):
     for names, idx in zip(res.problem.group_names(), res.problem.groups):
         print(f"  k = {res.k[idx[0]]:.4f} N m/rad  {', '.join(names)}")
     if res.problem.damping_variable:
-        print(f"  c/k = {res.c[0] / res.k[0]:.4f} s (searched within {res.problem.damping_bounds} s)")
+        window = ("" if res.damping_window is None else
+                  ", feasible for %.4f-%.4f s" % res.damping_window)
+        print(f"  c/k = {res.c[0] / res.k[0]:.4f} s (searched within {res.problem.damping_bounds} s"
+              f"{window})")
     ratio = res.k / res.k.max()
     print("  k / max k per hinge: " + ", ".join(f"{h.name} {r:.3f}"
                                                 for h, r in zip(model.hinges, ratio)))
@@ -115,7 +118,11 @@ def main(argv=None):
         else:
             first = (f"first feasible after {res.first_feasible[0]} evaluations, "
                      f"{res.first_feasible[1]:.1f} s" if res.first_feasible else "no feasible K")
-            damping = f", c/k {res.c[0] / res.k[0]:.3f} s" if res.problem.damping_variable else ""
+            damping = ""
+            if res.problem.damping_variable:
+                damping = f", c/k {res.c[0] / res.k[0]:.3f} s"
+                if res.damping_window is not None:
+                    damping += " (%.3f-%.3f)" % res.damping_window
             print(f"seed {seed:3d}: f = {res.f:+.4f}{damping}, {first}; {res.nfev} evaluations, "
                   f"{wall:.1f} s; re-check {'confirms' if confirmed else 'does not confirm' if res.success else '-'}",
                   flush=True)

@@ -165,6 +165,73 @@ def test_search_chooses_the_damping_ratio_when_it_is_a_variable(method):
     assert not fixed.success and fixed.outcome.collided
 
 
+def edge_outcome(model, settings):
+    """Feasible for c/k in 0.18-0.22 s, with d largest at the low edge (as on the paper scene)."""
+    h = model.hinges[0]
+    beta = h.c / h.k
+    if not 0.18 <= beta <= 0.22:
+        return Outcome(collided=True, v=abs(np.log10(beta / 0.2)), d=0.0, flat_residual=0.0)
+    return Outcome(collided=False, v=0.0, d=0.02 + 0.1 * np.log10(0.22 / beta), flat_residual=0.0)
+
+
+def test_the_result_sits_in_the_middle_of_its_feasible_damping_range():
+    s = scene(max_evaluations=200, damping_ratio_bounds=[0.01, 0.5])
+    res = optimise(chain_model(beta=0.043), s, workers=1, evaluation=edge_outcome)
+    assert res.success and res.nfev <= 200
+    lo, hi = res.damping_window
+    tol = 10 ** 0.005  # the bisection's resolution
+    assert 0.18 <= lo < 0.18 * tol and 0.22 / tol < hi <= 0.22
+    assert res.c[0] / res.k[0] == pytest.approx(math.sqrt(lo * hi), rel=1e-9)
+    assert "centred" in res.message
+    # The search's own best was at the low edge, with more clearance.
+    edge = min(res.history, key=lambda e: e.f)
+    assert edge.outcome.feasible and edge.f < res.f and edge.c[0] / edge.k[0] < 0.18 * 1.1
+    # A budget with no room for the centring leaves c/k where the search put it.
+    small = optimise(chain_model(beta=0.043), scene(max_evaluations=25, damping_ratio_bounds=[0.01, 0.5]),
+                     workers=1, evaluation=edge_outcome)
+    assert small.damping_window is None and small.nfev <= 25
+
+
+def holed_outcome(model, settings):
+    """edge_outcome with a hole at c/k 0.195-0.205 s, around the window's middle."""
+    h = model.hinges[0]
+    if 0.195 <= h.c / h.k <= 0.205:
+        return Outcome(collided=True, v=0.01, d=0.0, flat_residual=0.0)
+    return edge_outcome(model, settings)
+
+
+def test_a_hole_in_the_damping_range_leaves_the_searchs_k():
+    s = scene(max_evaluations=200, damping_ratio_bounds=[0.01, 0.5])
+    res = optimise(chain_model(beta=0.043), s, workers=1, evaluation=holed_outcome)
+    assert res.success and res.damping_window is not None
+    assert res.best is min(res.history, key=lambda e: e.f) and "centred" not in res.message
+
+
+def two_basins(model, settings):
+    """k[0] >= 0.05: d = 50 mm, feasible for c/k 0.1995-0.2005 s only; else d = 30 mm, 0.15-0.25 s."""
+    h = model.hinges[0]
+    band, d = ((0.1995, 0.2005), 0.05) if h.k >= 0.05 else ((0.15, 0.25), 0.03)
+    ok = band[0] <= h.c / h.k <= band[1]
+    return Outcome(collided=not ok, v=0.0 if ok else 0.1, d=d if ok else 0.0, flat_residual=0.0)
+
+
+def test_centring_prefers_a_k_with_margin_in_damping_to_a_knife_edge():
+    from panel_deploy.optimise.parallel import Job, SerialBackend
+    from panel_deploy.optimise.search import _Search
+
+    model = chain_model(beta=0.043)
+    problem = StiffnessProblem.from_model(model, (0.001, 0.2), 0.1, damping_bounds=(0.01, 0.5))
+    search = _Search(problem, SerialBackend(Job(model, scene(), two_basins)), 200, None, 0.05, 3)
+    knife, wide = search._batch([np.log10([0.1, 0.1, 0.1, 0.2]), np.log10([0.01, 0.1, 0.1, 0.2])])
+    assert knife.f < wide.f < 0
+    search.centre_damping()
+    lo, hi = search.damping_window
+    tol = 10 ** 0.005
+    assert 0.15 <= lo < 0.15 * tol and 0.25 / tol < hi <= 0.25
+    assert search.centred.k[0] == pytest.approx(0.01) and search.at_centre
+    assert search.centred.c[0] / search.centred.k[0] == pytest.approx(math.sqrt(lo * hi))
+
+
 def test_restart_leaves_a_colliding_plateau():
     res = optimise(chain_model(), scene(restarts=5, seed=3), workers=1, evaluation=plateau_outcome)
     assert res.initial.outcome.collided  # K_0 collides, and the gradient there is zero

@@ -11,6 +11,7 @@ Format (``format: panel_deploy.stiffness/1``)::
     bounds: [0.001, 0.2]         # N m/rad
     damping_ratio: 0.043         # s, c/k of the result (median over sprung hinges)
     damping_ratio_bounds: null   # s, [lower, upper] if c/k was searched for too
+    damping_window: null         # s, then the c/k range over which K is feasible
     f: -0.21                     # objective, Eq. (8) + flat term
     v: 0.0                       # m/s, approach speed at the first collision
     d: 0.021                     # m, smallest proximal distance
@@ -53,7 +54,9 @@ def result_to_dict(result, scene_name: str = "", extra: dict | None = None) -> d
            "bounds": [float(b) for b in result.problem.bounds],
            "damping_ratio": float(np.median(result.c / result.k)),
            "damping_ratio_bounds": None if result.problem.damping_bounds is None
-           else [float(b) for b in result.problem.damping_bounds]}
+           else [float(b) for b in result.problem.damping_bounds],
+           "damping_window": None if result.damping_window is None
+           else [float(b) for b in result.damping_window]}
     out.update(result.best.summary())
     out["initial"] = result.initial.summary() if result.initial is not None else None
     out.update(success=bool(result.success), status=int(result.status), message=result.message,

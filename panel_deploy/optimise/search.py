@@ -23,6 +23,7 @@ run as one parallel batch.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 from typing import Callable, NamedTuple
@@ -34,6 +35,18 @@ from ..errors import OptimisationError
 from .evaluate import Evaluation, run_deployment
 from .parallel import BudgetExhausted, Evaluator, Job, make_backend
 from .problem import StiffnessProblem
+
+
+#: How far (decades of c/k, a factor 2) and how finely (1.2 %) the ends of
+#: the result's feasible c/k range are looked for (:meth:`_Search.centre_damping`):
+#: the paper scene's optima stay feasible over 3-20 % of c/k.
+CENTRE_REACH, CENTRE_TOL = math.log10(2.0), 0.005
+#: A c/k window this wide (decades: +-5 %) ends the look for a wider one, among
+#: this many of the best feasible K.
+CENTRE_WIDE, CENTRE_CANDIDATES = math.log10(1.1), 3
+#: Evaluations the centring needs at most: per candidate both far ends and
+#: the bisection steps of both sides; then the middle.
+CENTRE_EVALUATIONS = CENTRE_CANDIDATES * (2 + 2 * math.ceil(math.log2(CENTRE_REACH / CENTRE_TOL))) + 1
 
 
 class Progress(NamedTuple):
@@ -91,6 +104,13 @@ class OptimisationResult:
         back (the rest of the budget only improves d), None if none did.
     history : list of Evaluation
         Every evaluation, in the order run.
+    damping_window : (float, float) or None
+        When c/k is a variable and a feasible K was found: the c/k range (s)
+        over which the result's K stays feasible (to 1.2 %, within a factor 2
+        of the c/k the search gave it). ``k``, ``c`` and ``best`` are
+        then one of the best few feasible K at the middle of its window
+        (:meth:`_Search.centre_damping`), which may score a little worse
+        than the largest-d K in ``history``.
     """
 
     k: np.ndarray
@@ -108,6 +128,7 @@ class OptimisationResult:
     wall_time: float
     first_feasible: tuple | None = None
     history: list = field(default_factory=list, repr=False)
+    damping_window: tuple | None = None
 
     @property
     def f(self) -> float:
@@ -241,6 +262,9 @@ class _Search:
         self.nstarts = 0
         self.budget_spent = False
         self.interrupted = False
+        self.centred = None
+        self.at_centre = False
+        self.damping_window = None
 
     def _report(self):
         if self.progress is not None:
@@ -325,10 +349,82 @@ class _Search:
         best = self.evaluator.best
         return self.problem.x_of(best.k, best.c)
 
+    def centre_damping(self) -> None:
+        """Move the result's c/k to the middle of the c/k range over which it is feasible.
+
+        The search maximises d, and on the paper scene d grows as damping falls,
+        so its optimum sits near the lower end of its c/k window, where
+        collisions begin, and some optima are feasible at their own c/k only.
+        The hinge damping is what a build controls least (paper section 5), so
+        the result is chosen for margin in c/k: of the :data:`CENTRE_CANDIDATES`
+        feasible K with the lowest f, the first whose window spans
+        :data:`CENTRE_WIDE` (else the widest), at its window's middle. That
+        trades a little d for margin both ways. If the middle is not feasible
+        (the window has a hole), the candidate keeps its own c/k.
+        """
+        candidates, seen = [], set()
+        for ev in sorted((e for e in self.evaluator.history if e.outcome.feasible),
+                         key=lambda e: e.f):
+            if (key := self.evaluator.key(ev.k)) not in seen:
+                seen.add(key)
+                candidates.append(ev)
+            if len(candidates) == CENTRE_CANDIDATES:
+                break
+        if not candidates:
+            return
+        self.phase, self.iteration = "centre", 0
+        widest = None
+        for ev in candidates:
+            window = self._feasible_range(ev)
+            if widest is None or window[1] - window[0] > widest[1][1] - widest[1][0]:
+                widest = (ev, window)
+            if window[1] - window[0] >= CENTRE_WIDE:
+                break
+        ev, (lo, hi) = widest
+        self.damping_window = (10.0 ** lo, 10.0 ** hi)
+        x = self.problem.x_of(ev.k, ev.c)
+        centre = self._batch([np.append(x[:-1], (lo + hi) / 2)])[0]
+        self.centred = centre if centre.outcome.feasible else ev
+        self.at_centre = centre.outcome.feasible
+
+    def _feasible_range(self, ev) -> tuple:
+        """(lower, upper) log10 c/k between which ``ev``'s K stays feasible.
+
+        Both ends by bisection, side by side as batches of two, to
+        :data:`CENTRE_TOL` within :data:`CENTRE_REACH` of ``ev``'s own c/k
+        (which is feasible).
+        """
+        x = self.problem.x_of(ev.k, ev.c)
+        lo, hi = self.problem.x_bounds[-1]
+        # Per side [known feasible, known infeasible or the reach's end], in log10 c/k.
+        sides = [[x[-1], max(lo, x[-1] - CENTRE_REACH)], [x[-1], min(hi, x[-1] + CENTRE_REACH)]]
+
+        def at(us):
+            self._iterated()
+            return self._batch([np.append(x[:-1], u) for u in us])
+
+        for side, far in zip(sides, at([side[1] for side in sides])):
+            if far.outcome.feasible:
+                side[0] = side[1]
+        while unresolved := [side for side in sides if abs(side[1] - side[0]) > CENTRE_TOL]:
+            mids = [(side[0] + side[1]) / 2 for side in unresolved]
+            for side, mid, e in zip(unresolved, mids, at(mids)):
+                side[0 if e.outcome.feasible else 1] = mid
+        return sides[0][0], sides[1][0]
+
     def run(self, method, restarts, rng, popsize) -> bool:
-        """Fig. 4: search, restart while no feasible K; True if the last local search converged."""
+        """Fig. 4: search, restart while no feasible K; True if the last local search converged.
+
+        When c/k is a variable, :data:`CENTRE_EVALUATIONS` evaluations are
+        kept back from the budget (if it has twice that) to centre the
+        result's c/k afterwards.
+        """
         x0 = self.problem.x0
         converged = False
+        # A budget too small to spare them leaves c/k where the search put it.
+        reserve = CENTRE_EVALUATIONS if (self.problem.damping_variable and
+                                         self.evaluator.max_evaluations >= 2 * CENTRE_EVALUATIONS) else 0
+        self.evaluator.max_evaluations -= reserve
         try:
             self.phase = "K_0"
             self.initial = self._batch([x0])[0]
@@ -352,11 +448,17 @@ class _Search:
             if self.evaluator.best is None:
                 raise
             self.interrupted = True
-            converged = False
+            return False
+        self.evaluator.max_evaluations += reserve
+        if reserve:
+            try:
+                self.centre_damping()
+            except KeyboardInterrupt:
+                self.interrupted = True
         return converged
 
     def result(self, method, converged, wall_time) -> OptimisationResult:
-        best = self.evaluator.best
+        best = self.evaluator.best if self.centred is None else self.centred
         feasible = best is not None and best.outcome.feasible
         if best is None:
             raise OptimisationError("max_evaluations: the budget does not allow a single evaluation")
@@ -377,9 +479,13 @@ class _Search:
             message = ("collision-free and flat; stopped by the evaluation budget"
                        if self.budget_spent else
                        "collision-free and flat; local search stopped before converging")
+        if self.centred is not None and not self.interrupted:
+            lo, hi = self.damping_window
+            message += (f"; c/k centred in its feasible range {lo:.4g}-{hi:.4g} s" if self.at_centre
+                        else f"; feasible for c/k {lo:.4g}-{hi:.4g} s")
         return OptimisationResult(
             k=best.k, c=best.c, best=best, initial=getattr(self, "initial", None),
             problem=self.problem, success=feasible, status=status, message=message,
             nfev=self.evaluator.nfev, nit=self.nit, nstarts=self.nstarts, method=method,
             wall_time=wall_time, first_feasible=self.evaluator.first_feasible,
-            history=list(self.evaluator.history))
+            history=list(self.evaluator.history), damping_window=self.damping_window)

@@ -267,8 +267,9 @@ class OptimisationSection:
     k0: float = spec(0.1, number(0, low_open=True), "N m/rad", "starting stiffness K_0")
     damping_ratio_bounds: tuple = spec(None, optional(_bounds), "s",
                                        "lower and upper c/k when one damping ratio for all hinges "
-                                       "(a lubricant, paper section 5) is searched for too; null "
-                                       "keeps hinges.damping_ratio, which is the start otherwise")
+                                       "(a lubricant, paper section 5) is searched for too, from "
+                                       "hinges.damping_ratio, and the result centred in the c/k "
+                                       "range where its K is feasible; null: c/k stays fixed")
     method: str = spec("local", choice("local", "global"), "", "local (scipy minimize) or global (differential evolution)")
     restarts: int = spec(3, integer(0), "", "restarts from new K_0 while collisions remain")
     max_evaluations: int = spec(200, integer(1), "", "simulation budget")

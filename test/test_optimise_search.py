@@ -203,7 +203,7 @@ def holed_outcome(model, settings):
 def test_a_hole_in_the_damping_range_leaves_the_searchs_k():
     s = scene(max_evaluations=200, damping_ratio_bounds=[0.01, 0.5])
     res = optimise(chain_model(beta=0.043), s, workers=1, evaluation=holed_outcome)
-    assert res.success and res.damping_window is not None
+    assert res.success and res.damping_window is None
     assert res.best is min(res.history, key=lambda e: e.f) and "centred" not in res.message
 
 
@@ -228,7 +228,7 @@ def test_centring_prefers_a_k_with_margin_in_damping_to_a_knife_edge():
     lo, hi = search.damping_window
     tol = 10 ** 0.005
     assert 0.15 <= lo < 0.15 * tol and 0.25 / tol < hi <= 0.25
-    assert search.centred.k[0] == pytest.approx(0.01) and search.at_centre
+    assert search.centred.k[0] == pytest.approx(0.01)
     assert search.centred.c[0] / search.centred.k[0] == pytest.approx(math.sqrt(lo * hi))
 
 

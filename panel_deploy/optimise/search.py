@@ -110,7 +110,8 @@ class OptimisationResult:
         of the c/k the search gave it). ``k``, ``c`` and ``best`` are
         then one of the best few feasible K at the middle of its window
         (:meth:`_Search.centre_damping`), which may score a little worse
-        than the largest-d K in ``history``.
+        than the largest-d K in ``history``. None otherwise, and when the
+        middle was not feasible (a hole in the window).
     """
 
     k: np.ndarray
@@ -263,7 +264,6 @@ class _Search:
         self.budget_spent = False
         self.interrupted = False
         self.centred = None
-        self.at_centre = False
         self.damping_window = None
 
     def _report(self):
@@ -360,7 +360,7 @@ class _Search:
         feasible K with the lowest f, the first whose window spans
         :data:`CENTRE_WIDE` (else the widest), at its window's middle. That
         trades a little d for margin both ways. If the middle is not feasible
-        (the window has a hole), the candidate keeps its own c/k.
+        (the window has a hole), the result stays the search's best K.
         """
         candidates, seen = [], set()
         for ev in sorted((e for e in self.evaluator.history if e.outcome.feasible),
@@ -381,11 +381,11 @@ class _Search:
             if window[1] - window[0] >= CENTRE_WIDE:
                 break
         ev, (lo, hi) = widest
-        self.damping_window = (10.0 ** lo, 10.0 ** hi)
         x = self.problem.x_of(ev.k, ev.c)
         centre = self._batch([np.append(x[:-1], (lo + hi) / 2)])[0]
-        self.centred = centre if centre.outcome.feasible else ev
-        self.at_centre = centre.outcome.feasible
+        if centre.outcome.feasible:
+            self.centred = centre
+            self.damping_window = (10.0 ** lo, 10.0 ** hi)
 
     def _feasible_range(self, ev) -> tuple:
         """(lower, upper) log10 c/k between which ``ev``'s K stays feasible.
@@ -480,9 +480,7 @@ class _Search:
                        if self.budget_spent else
                        "collision-free and flat; local search stopped before converging")
         if self.centred is not None and not self.interrupted:
-            lo, hi = self.damping_window
-            message += (f"; c/k centred in its feasible range {lo:.4g}-{hi:.4g} s" if self.at_centre
-                        else f"; feasible for c/k {lo:.4g}-{hi:.4g} s")
+            message += "; c/k centred in its feasible range %.4g-%.4g s" % self.damping_window
         return OptimisationResult(
             k=best.k, c=best.c, best=best, initial=getattr(self, "initial", None),
             problem=self.problem, success=feasible, status=status, message=message,

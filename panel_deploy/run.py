@@ -29,30 +29,34 @@ def apply_overrides(scene, args):
 
 
 def simulate_scene(scene, stiffness_file=None):
-    """Simulate a scene and check it for collisions: (model, result, report)."""
+    """Simulate a scene and check it for collisions: (model, result, report).
+
+    With ``stiffness_file`` (a result file) its k replaces the scene's, c
+    following k, and :func:`damping_note` says so if the file's c differs.
+    """
     from .build import build_model
     from .collision import CollisionSettings, check_trajectory
     from .dynamics import simulate
 
     model = build_model(scene)
     if stiffness_file:
-        from .optimise import load_stiffness
-        model = model.with_stiffness(load_stiffness(stiffness_file, model))
+        from .optimise import load_hinges
+        k, c_file = load_hinges(stiffness_file, model)
+        model = model.with_stiffness(k)
+        damping_note(model, c_file, stiffness_file)
     result = simulate(model, scene.simulation)
     report = check_trajectory(model, result, CollisionSettings.from_scene(scene))
     return model, result, report
 
 
-def damping_note(model, stiffness_file):
-    """Say on stderr when a result file's damping is not the one simulated.
+def damping_note(model, c_file, stiffness_file):
+    """Say on stderr when a result file's damping ``c_file`` (N m s/rad per
+    hinge, or None) is not the one ``model`` simulates.
 
     The scene decides c/k (so that ``--set hinges.damping_ratio=...`` tries a
     design under other dampers); a result optimised under another ratio then
     deploys differently, which deserves a word rather than silence.
     """
-    from .optimise import load_damping
-
-    c_file = load_damping(stiffness_file, model)
     c = np.array([h.c for h in model.hinges])
     sprung = model.stiffness > 0
     if c_file is None or not sprung.any() or np.allclose(c_file, c, rtol=1e-6, atol=0.0):
@@ -72,8 +76,6 @@ def simulate_command(args, scene) -> int:
 
     scene = apply_overrides(scene, args)
     model, result, report = simulate_scene(scene, args.stiffness)
-    if args.stiffness:
-        damping_note(model, args.stiffness)
     if args.out:
         from .trajectory_io import save_trajectory
         save_trajectory(args.out, result, scene, model)

@@ -16,14 +16,14 @@ Public API::
 
 from .command import optimise_command
 from .evaluate import FLAT_TOLERANCE, Evaluation, Outcome, damping_ratio, evaluate, objective, run_deployment
-from .io import load_damping, load_stiffness, result_to_dict, save_result
+from .io import load_damping, load_hinges, load_stiffness, result_to_dict, save_result
 from .manufacture import SpringAssignment, ToleranceReport, snap_to_springs, soft_hinges, tolerance_check, verify
 from .problem import StiffnessProblem
 from .search import OptimisationResult, Progress, optimise, print_progress
 
 __all__ = [
     "FLAT_TOLERANCE", "Evaluation", "OptimisationResult", "Outcome", "Progress", "SpringAssignment",
-    "StiffnessProblem", "ToleranceReport", "damping_ratio", "evaluate", "load_damping", "load_stiffness", "objective",
+    "StiffnessProblem", "ToleranceReport", "damping_ratio", "evaluate", "load_damping", "load_hinges", "load_stiffness", "objective",
     "optimise", "optimise_command", "print_progress", "result_to_dict", "run_deployment",
     "save_result", "snap_to_springs", "soft_hinges", "tolerance_check", "verify",
 ]

@@ -105,7 +105,7 @@ def load_stiffness(path, model) -> np.ndarray:
     OptimisationError
         ``stiffness file ...`` naming the file and the offending entry.
     """
-    return _hinge_values(path, model, "k")
+    return load_hinges(path, model)[0]
 
 
 def load_damping(path, model) -> np.ndarray | None:
@@ -113,11 +113,15 @@ def load_damping(path, model) -> np.ndarray | None:
 
     As :func:`load_stiffness`; a file that gives ``c`` must give it for every hinge.
     """
-    return _hinge_values(path, model, "c")
+    return load_hinges(path, model)[1]
 
 
-def _hinge_values(path, model, key):
-    """``hinges.<name>.<key>`` of every hinge of ``model`` (a bare number is k)."""
+def load_hinges(path, model) -> tuple:
+    """``(k, c)`` of every hinge of ``model`` from one reading of a result file.
+
+    k as :func:`load_stiffness`, c as :func:`load_damping` (None if the file
+    gives none); a bare number for a hinge is its k.
+    """
     where = f"stiffness file {str(path)!r}"
     try:
         data = yaml.safe_load(Path(path).read_text())
@@ -139,15 +143,17 @@ def _hinge_values(path, model, key):
         raise OptimisationError(f"{where}: hinges: missing {', '.join(missing)}")
     entries = [given[name] if isinstance(given[name], dict) else {"k": given[name]}
                for name in names]
-    if key != "k" and not any(key in e for e in entries):
-        return None
-    out = np.empty(len(names))
-    unit = "N m/rad" if key == "k" else "N m s/rad"
-    for i, (name, entry) in enumerate(zip(names, entries)):
-        value = entry.get(key)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value) or value < 0:
-            raise OptimisationError(f"{where}: hinges.{name}.{key}: expected a finite number >= 0 "
-                                    f"{unit}, got {value!r}")
-        out[i] = value
-    return out
+
+    def values(key, unit):
+        out = np.empty(len(names))
+        for i, (name, entry) in enumerate(zip(names, entries)):
+            value = entry.get(key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value) or value < 0:
+                raise OptimisationError(f"{where}: hinges.{name}.{key}: expected a finite number "
+                                        f">= 0 {unit}, got {value!r}")
+            out[i] = value
+        return out
+
+    k = values("k", "N m/rad")
+    return k, values("c", "N m s/rad") if any("c" in e for e in entries) else None

@@ -19,7 +19,10 @@ two convex bodies changes by at most the largest point displacement, so
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from ..model import Model
 
@@ -78,19 +81,11 @@ class PairSpeedBound:
         self.points = np.array([model.hinges[h].point - model.bodies[model.hinges[h].body_a].flat_position
                                 for h in model.joints]).reshape(-1, 3)
         self.axes = np.array([model.hinges[h].axis for h in model.joints]).reshape(-1, 3)
-        self._signs = np.array([(i, j, k) for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
 
     def radii(self, rotation, position) -> np.ndarray:
         """Largest distance (m) of each body's corners from each hinge line, (nb, n_coords)."""
-        corners = position[:, None] + np.einsum("cj,bij->bci", self._signs,
-                                                rotation * self.half[:, None, :])
-        Rp = rotation[self.parents]
-        point = position[self.parents] + np.einsum("kij,kj->ki", Rp, self.points)
-        axis = np.einsum("kij,kj->ki", Rp, self.axes)
-        rel = corners[:, :, None, :] - point[None, None]                 # (nb, 8, n, 3)
-        along = np.einsum("bcki,ki->bck", rel, axis)
-        dist2 = np.einsum("bcki,bcki->bck", rel, rel) - along ** 2
-        return np.sqrt(np.maximum(dist2, 0.0)).max(axis=1)
+        return _hinge_radii(np.asarray(rotation, dtype=float), np.asarray(position, dtype=float),
+                            self.half, self.parents, self.points, self.axes)
 
     def __call__(self, rate_bound, h, radii_a, radii_b, rows) -> np.ndarray:
         """Largest |d sd/dt| (m/s) over an interval of length h (s) of the pairs ``rows``.
@@ -102,16 +97,69 @@ class PairSpeedBound:
         rho_k <= (rho_k(a) + rho_k(b) + h Lambda_k) / 2, and never more than
         the chain radius.
         """
-        c = self.coords[rows]
-        w = rate_bound[c] * self.mask[rows]
-        out = []
-        for chain, body, suffix in ((self.chain_a[rows], self.b[rows], True),
-                                    (self.chain_b[rows], self.a[rows], False)):
-            W = w * chain
-            lam = (np.cumsum(W[:, ::-1], axis=1)[:, ::-1] if suffix else np.cumsum(W, axis=1)) - W
-            rho = (radii_a[body[:, None], c] + radii_b[body[:, None], c] + h * lam) / 2.0
-            out.append(np.sum(w * np.minimum(rho, chain), axis=1))
-        return np.minimum(*out)
+        return _speed_bound(rate_bound, float(h), radii_a, radii_b, np.asarray(rows, dtype=np.int64),
+                            self.coords, self.mask, self.chain_a, self.chain_b, self.a, self.b)
+
+
+# The kernels of this module run at every bisection step of the between-sample
+# refinement (thousands per deployment); as numpy expressions on these small
+# arrays they cost more than the exact distances they decide on.
+
+@njit(cache=True)
+def _hinge_radii(rotation, position, half, parents, points, axes):
+    """:meth:`PairSpeedBound.radii` (same shapes and units)."""
+    nb, n = rotation.shape[0], parents.shape[0]
+    out = np.zeros((nb, n))
+    corner, point, axis = np.empty(3), np.empty(3), np.empty(3)
+    for k in range(n):
+        R = rotation[parents[k]]
+        for i in range(3):
+            point[i] = position[parents[k], i]
+            axis[i] = 0.0
+            for j in range(3):
+                point[i] += R[i, j] * points[k, j]
+                axis[i] += R[i, j] * axes[k, j]
+        for b in range(nb):
+            far = 0.0
+            for m in range(8):
+                for i in range(3):
+                    corner[i] = position[b, i] - point[i]
+                    for j in range(3):
+                        sign = 1.0 if (m >> (2 - j)) & 1 else -1.0
+                        corner[i] += rotation[b, i, j] * sign * half[b, j]
+                along = corner[0] * axis[0] + corner[1] * axis[1] + corner[2] * axis[2]
+                far = max(far, corner[0] ** 2 + corner[1] ** 2 + corner[2] ** 2 - along * along)
+            out[b, k] = math.sqrt(far)
+    return out
+
+
+@njit(cache=True)
+def _speed_bound(rate_bound, h, radii_a, radii_b, rows, coords, mask, chain_a, chain_b, a, b):
+    """:meth:`PairSpeedBound.__call__` (same arguments and units), one pair at a time.
+
+    Seen from body a the joints beyond k move b's points; seen from b, those
+    before k move a's. The chain bound Lambda_k sums w_l chain_l over those
+    joints (suffix from a's side, prefix from b's)."""
+    M = coords.shape[1]
+    out = np.empty(rows.shape[0])
+    for i in range(rows.shape[0]):
+        p = rows[i]
+        beyond, total_a = 0.0, 0.0
+        for k in range(M - 1, -1, -1):
+            c = coords[p, k]
+            w = rate_bound[c] * mask[p, k]
+            rho = (radii_a[b[p], c] + radii_b[b[p], c] + h * beyond) / 2.0
+            total_a += w * min(rho, chain_a[p, k])
+            beyond += w * chain_a[p, k]
+        before, total_b = 0.0, 0.0
+        for k in range(M):
+            c = coords[p, k]
+            w = rate_bound[c] * mask[p, k]
+            rho = (radii_a[a[p], c] + radii_b[a[p], c] + h * before) / 2.0
+            total_b += w * min(rho, chain_b[p, k])
+            before += w * chain_b[p, k]
+        out[i] = min(total_a, total_b)
+    return out
 
 
 class HermiteSegment:
@@ -148,15 +196,20 @@ class HermiteSegment:
 
     def rate_bound(self, ta, tb) -> np.ndarray:
         """max |omega| over [ta, tb] of every coordinate, rad/s, shape (n,)."""
-        sa, sb = (ta - self.t0) / self.h, (tb - self.t0) / self.h
-        A, B, C = self._A, self._B, self._C
+        return _rate_bound(self._A, self._B, self._C, (ta - self.t0) / self.h,
+                           (tb - self.t0) / self.h, self.h)
 
-        def rate(s):
-            return np.abs(C + s * (B + s * A))
 
-        bound = np.maximum(rate(sa), rate(sb))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            vertex = np.where(A != 0.0, -B / (2.0 * A), sa)
-        inside = (vertex > sa) & (vertex < sb)
-        bound = np.where(inside, np.maximum(bound, rate(np.clip(vertex, sa, sb))), bound)
-        return bound / self.h
+@njit(cache=True)
+def _rate_bound(A, B, C, sa, sb, h):
+    """:meth:`HermiteSegment.rate_bound` on s in [sa, sb]: |omega| = |C + s (B + s A)| / h
+    is largest at an end or at the parabola's vertex -B / (2 A) if that lies inside."""
+    out = np.empty(A.shape[0])
+    for i in range(A.shape[0]):
+        best = max(abs(C[i] + sa * (B[i] + sa * A[i])), abs(C[i] + sb * (B[i] + sb * A[i])))
+        if A[i] != 0.0:
+            s = -B[i] / (2.0 * A[i])
+            if sa < s < sb:
+                best = max(best, abs(C[i] + s * (B[i] + s * A[i])))
+        out[i] = best / h
+    return out

@@ -215,3 +215,28 @@ def test_optimise_command_re_checks_the_damping_the_search_chose(monkeypatch, ca
     # (c/k within ~2 %) all stay in it.
     assert data["damping_window"] == pytest.approx(DAMPED_BAND, rel=0.012)
     assert data["tolerance"]["collision_free"] == 5
+
+
+def test_optimise_command_without_a_feasible_k_says_what_to_try(monkeypatch, capsys, tmp_path):
+    # The stand-in is collision-free only for c/k in its band, so at the model's fixed
+    # 0.043 s no K is feasible: exit 1, and the hint names the damping search; once
+    # c/k is searched the hint no longer offers it.
+    import functools
+    from types import SimpleNamespace
+
+    from panel_deploy.optimise import command
+    from test_optimise_search import damped_outcome
+
+    monkeypatch.setattr("panel_deploy.build.build_model", lambda scene: chain_model(beta=BETA))
+    for name in ("optimise", "verify"):
+        monkeypatch.setattr(command, name,
+                            functools.partial(getattr(command, name), evaluation=damped_outcome))
+    out = tmp_path / "k.yaml"
+    args = SimpleNamespace(quiet=False, workers=1, out=str(out))
+    assert command.optimise_command(args, scene(max_evaluations=10)) == 1
+    err = capsys.readouterr().err
+    assert out.exists()
+    assert "no feasible K: try" in err and f"--start {out} --method local" in err
+    assert "damping_ratio_bounds" in err
+    searched = SimpleNamespace(problem=SimpleNamespace(damping_variable=True))
+    assert "damping_ratio_bounds" not in command.next_steps(searched, None)

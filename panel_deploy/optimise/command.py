@@ -90,6 +90,8 @@ def optimise_command(args, scene) -> int:
         print(recheck_verdict(check))
     elif not quiet:
         print(recheck_verdict(check), file=sys.stderr)
+    if result.status == 2 and not quiet:
+        print(next_steps(result, out), file=sys.stderr)
     # A K the search found feasible counts only if the independent re-check agrees.
     return 0 if result.success and check.outcome.feasible else 1
 
@@ -107,3 +109,15 @@ def recheck_verdict(check) -> str:
     if not o.reached_flat:
         return head + f"collision-free but never flat (closest {o.flat_residual:.3f} rad)"
     return head + f"collision-free and flat, d = {o.d * 1e3:.2f} mm"
+
+
+def next_steps(result, out) -> str:
+    """What a user can try when the search found no feasible K (status 2)."""
+    start = f"--start {out} " if out else ""
+    steps = [f"more evaluations (--max-evaluations), or a local search from the best K "
+             f"({start}--method local)"]
+    if not result.problem.damping_variable:
+        steps.append("letting the search choose one c/k for all hinges "
+                     "(--set \"optimisation.damping_ratio_bounds=[lo,hi]\", s), which widens a "
+                     "thin feasible set (README: the paper scene)")
+    return "no feasible K: try " + "; or ".join(steps)

@@ -133,3 +133,17 @@ def test_tolerance_check_counts_the_perturbed_copies():
     np.testing.assert_allclose(damped.evaluations[0].c, 0.2 * 0.05)
     with pytest.raises(OptimisationError, match="^stiffness_tol: "):
         tolerance_check(model, [0.05] * 3, scene(), stiffness_tol=1.5, evaluation=band_outcome)
+
+
+def test_feasible_interval_is_clopper_pearson():
+    # All or none feasible: the exact two-sided interval has the closed form (alpha / 2)^(1/n).
+    from panel_deploy.optimise.manufacture import ToleranceReport
+
+    def report(feasible, n=20):
+        return ToleranceReport(n, 0.05, 0.05, feasible, feasible, feasible)
+
+    assert report(20).feasible_interval() == pytest.approx((0.025 ** (1 / 20), 1.0))
+    assert report(0).feasible_interval() == pytest.approx((0.0, 1 - 0.025 ** (1 / 20)))
+    lo, hi = report(13).feasible_interval(0.9)
+    assert lo < 13 / 20 < hi and report(13).feasible_interval(0.99)[0] < lo
+    assert report(20).to_dict()["feasible_interval_95"] == pytest.approx([0.8316, 1.0], abs=1e-4)

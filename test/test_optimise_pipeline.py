@@ -215,6 +215,7 @@ def test_optimise_command_re_checks_the_damping_the_search_chose(monkeypatch, ca
     # (c/k within ~2 %) all stay in it.
     assert data["damping_window"] == pytest.approx(DAMPED_BAND, rel=0.012)
     assert data["tolerance"]["collision_free"] == 5
+    assert data["tolerance"]["feasible_interval_95"] == pytest.approx([0.025 ** (1 / 5), 1.0])
 
 
 def test_optimise_command_without_a_feasible_k_says_what_to_try(monkeypatch, capsys, tmp_path):
@@ -232,10 +233,13 @@ def test_optimise_command_without_a_feasible_k_says_what_to_try(monkeypatch, cap
         monkeypatch.setattr(command, name,
                             functools.partial(getattr(command, name), evaluation=damped_outcome))
     out = tmp_path / "k.yaml"
-    args = SimpleNamespace(quiet=False, workers=1, out=str(out))
+    args = SimpleNamespace(quiet=False, workers=1, out=str(out), springs=[0.05, 0.1])
     assert command.optimise_command(args, scene(max_evaluations=10)) == 1
-    err = capsys.readouterr().err
+    captured = capsys.readouterr()
+    err = captured.err
     assert out.exists()
+    assert "re-check (rtol / 10, twice the samples): collision at" in captured.out
+    assert "snapped to the springs: collision at" in captured.out
     assert "no feasible K: try" in err and f"--start {out} --method local" in err
     assert "damping_ratio_bounds" in err
     searched = SimpleNamespace(problem=SimpleNamespace(damping_variable=True))

@@ -55,6 +55,7 @@ def optimise_command(args, scene) -> int:
         return 130
     check = verify(model, result.k, scene, c=result.c)
     extra["verification"] = {"tighten": 10.0, "refine": 2, **check.summary()}
+    lines = [verdict("re-check (rtol / 10, twice the samples)", check)]
     springs = arg("springs")
     if springs:
         values = [float(s) for s in springs.split(",")] if isinstance(springs, str) else springs
@@ -68,12 +69,16 @@ def optimise_command(args, scene) -> int:
                        for name, k, s, z in zip(result.problem.hinge_names, snap.k,
                                                 snap.springs, snap.zeroed)},
             **built.summary()}
+        lines.append(verdict("snapped to the springs", built))
     n = arg("perturb")
     if n:
         tol = arg("perturb_tol") or 0.05
         report = tolerance_check(model, result.k, scene, c=result.c, n=n, stiffness_tol=tol,
                                  damping_tol=tol, workers=arg("workers"), dask_address=arg("dask"))
         extra["tolerance"] = report.to_dict()
+        lo, hi = report.feasible_interval()
+        lines.append(f"{report.feasible} of {n} copies with k and c within +-{tol * 100:g} % collision-free "
+                     f"and flat (95 % interval of the feasible fraction {lo * 100:.0f}-{hi * 100:.0f} %)")
     out = arg("out")
     if out:
         save_result(result, out, scene.name, extra)
@@ -87,19 +92,19 @@ def optimise_command(args, scene) -> int:
         print(f"{result.message}: f = {result.f:.5f}{damping}, nfev {result.nfev}, "
               f"{result.wall_time:.1f} s -> {out}")
     if out and not arg("json", False):
-        print(recheck_verdict(check))
+        print("\n".join(lines))
     elif not quiet:
-        print(recheck_verdict(check), file=sys.stderr)
+        print("\n".join(lines), file=sys.stderr)
     if result.status == 2 and not quiet:
         print(next_steps(result, out), file=sys.stderr)
     # A K the search found feasible counts only if the independent re-check agrees.
     return 0 if result.success and check.outcome.feasible else 1
 
 
-def recheck_verdict(check) -> str:
-    """One line on the re-check of the optimum (the :class:`Evaluation` of :func:`verify`)."""
+def verdict(label, check) -> str:
+    """One line on a check of a K (an :class:`Evaluation` of :func:`verify`)."""
     o = check.outcome
-    head = "re-check (rtol / 10, twice the samples): "
+    head = f"{label}: "
     if not o.simulated:
         return head + f"the simulation failed ({o.message})"
     if o.collided:

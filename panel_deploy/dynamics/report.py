@@ -7,6 +7,7 @@ import numpy as np
 
 from ..model import Model
 from ..scene import SimulationSection
+from .kernels import hinge_law
 from .result import SimulationResult
 
 #: A hinge has left its stowed angle once |theta - theta_stowed| exceeds this, rad.
@@ -16,11 +17,50 @@ RELEASE_TOL = 1e-2
 FLAT_TOL = SimulationSection.flat_tolerance
 
 
+def hinge_order(model: Model) -> list:
+    """Hinge indices in report order: tree coordinates, then cut hinges."""
+    return list(model.joints) + list(model.cut_hinges)
+
+
 def hinge_angles(model: Model, result: SimulationResult):
-    """Names and angles (s, n_hinges) of every hinge, tree coordinates then cut hinges."""
-    idx = list(model.joints) + list(model.cut_hinges)
+    """Names and angles (s, n_hinges) of every hinge, in :func:`hinge_order`."""
+    idx = hinge_order(model)
     theta = np.column_stack([result.theta, result.extra["cut_theta"]])
     return [model.hinges[h].name for h in idx], idx, theta
+
+
+def hinge_states(model: Model, result: SimulationResult):
+    """Angle, rate and torque of every hinge at every sample, as a joint-state stream carries them.
+
+    Hinges are in :func:`hinge_angles` order (tree coordinates, then cut
+    hinges). A cut hinge's rate is the bodies' relative angular velocity
+    along its axis as carried by ``body_a`` (exact for a closed loop; the
+    penalty closure leaves a gap of micrometres). The torque is the hinge's
+    own law, Eq. (2)-(4): springs, dampers and joint-limit contact, N m,
+    acting on ``body_b``.
+
+    Returns
+    -------
+    names : list of str
+    theta, omega, torque : (s, n_hinges) ndarray
+        rad, rad/s, N m.
+    """
+    names, idx, theta = hinge_angles(model, result)
+    s = len(result.t)
+    omega = np.empty((s, len(idx)))
+    omega[:, :model.n_coords] = result.omega
+    for col, h in enumerate(model.cut_hinges, start=model.n_coords):
+        hinge = model.hinges[h]
+        axis = result.rotation[:, hinge.body_a] @ hinge.axis
+        relative = result.angular_velocity[:, hinge.body_b] - result.angular_velocity[:, hinge.body_a]
+        omega[:, col] = np.einsum("ij,ij->i", axis, relative)
+    torque = np.empty_like(omega)
+    for col, h in enumerate(idx):
+        hinge = model.hinges[h]
+        for j in range(s):
+            torque[j, col] = hinge_law(theta[j, col], omega[j, col], hinge.k_hinge, hinge.c_hinge,
+                                       model.k_s, model.c_s)[0]
+    return names, theta, omega, torque
 
 
 def first_time(t, mask):

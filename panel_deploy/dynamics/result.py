@@ -82,3 +82,24 @@ class SimulationResult:
                  for k, v in self.extra.items()}
         return replace(self, **per_sample, energy={k: v[:n] for k, v in self.energy.items()},
                        extra=extra)
+
+
+def concatenate(blocks) -> SimulationResult:
+    """One result from consecutive blocks of :func:`~.simulate.simulate_segments`.
+
+    Per-sample arrays are joined; counters and ``wall_time`` are summed;
+    ``success``, ``status`` and ``message`` are the last block's.
+    """
+    blocks = list(blocks)
+    if not blocks:
+        raise ValueError("concatenate: no blocks")
+    last = blocks[-1]
+    per_sample = {name: np.concatenate([getattr(b, name) for b in blocks]) for name in (
+        "t", "theta", "omega", "rotation", "position", "linear_velocity",
+        "angular_velocity", "constraint_gap", "closure_sigma_min")}
+    energy = {k: np.concatenate([b.energy[k] for b in blocks]) for k in last.energy}
+    counters = {name: sum(getattr(b, name) for b in blocks)
+                for name in ("nfev", "njev", "nlu", "nsteps", "wall_time")}
+    extra = dict(last.extra, cut_theta=np.concatenate([b.extra["cut_theta"] for b in blocks]),
+                 switches=sum(b.extra["switches"] for b in blocks))
+    return replace(last, **per_sample, **counters, energy=energy, extra=extra)

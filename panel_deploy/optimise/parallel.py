@@ -146,6 +146,10 @@ class BudgetExhausted(Exception):
     """Raised inside a solver's objective to stop it when the budget is spent."""
 
 
+class Cancelled(Exception):
+    """Raised inside a solver's objective when the caller asked the search to stop."""
+
+
 class Evaluator:
     """Cached, budgeted evaluation of batches of K on a backend.
 
@@ -156,12 +160,15 @@ class Evaluator:
         Simulations allowed; cached K are free.
     on_batch : callable, optional
         Called with no argument after each batch (progress reporting).
+    stop : callable, optional
+        Called with no argument before each batch; True raises :class:`Cancelled`.
     """
 
-    def __init__(self, backend, max_evaluations: int, on_batch=None):
+    def __init__(self, backend, max_evaluations: int, on_batch=None, stop=None):
         self.backend = backend
         self.max_evaluations = max_evaluations
         self.on_batch = on_batch
+        self.stop = stop
         self.cache = {}
         self.history = []
         self.best = None
@@ -183,7 +190,8 @@ class Evaluator:
         """Evaluations of every K of ``ks`` (and damping ``cs``), in order.
 
         Raises :class:`BudgetExhausted`, before running anything, if the new
-        K of the batch do not fit in the budget.
+        K of the batch do not fit in the budget, and :class:`Cancelled` if
+        ``stop`` says so.
         """
         cs = [None] * len(ks) if cs is None else cs
         keys = [self.key(k, c) for k, c in zip(ks, cs)]
@@ -193,6 +201,8 @@ class Evaluator:
                 todo[key] = (np.asarray(k, dtype=float), None if c is None else np.asarray(c, float))
         if self.nfev + len(todo) > self.max_evaluations:
             raise BudgetExhausted
+        if todo and self.stop is not None and self.stop():
+            raise Cancelled
         if todo:
             for key, ev in zip(todo, self.backend.map(list(todo.values()))):
                 self.cache[key] = ev

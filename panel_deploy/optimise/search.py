@@ -33,7 +33,7 @@ from scipy.optimize import differential_evolution, minimize, minimize_scalar
 
 from ..errors import OptimisationError
 from .evaluate import Evaluation, run_deployment
-from .parallel import BudgetExhausted, Evaluator, Job, make_backend
+from .parallel import BudgetExhausted, Cancelled, Evaluator, Job, make_backend
 from .problem import StiffnessProblem
 
 
@@ -87,7 +87,8 @@ class OptimisationResult:
     status : int
         0 feasible and the solver converged; 1 feasible, stopped by the
         evaluation budget or the iteration limit; 2 no feasible K found;
-        3 interrupted (Ctrl-C): the best K of the evaluations done so far.
+        3 interrupted (Ctrl-C, SIGTERM or ``stop``): the best K of the
+        evaluations done so far.
     message : str
     nfev : int
         Simulations run (cached repeats not counted).
@@ -142,7 +143,8 @@ class OptimisationResult:
 
 def optimise(model, settings, *, workers=None, dask_address=None, progress: Callable | None = None,
              groups=None, k0=None, method=None, max_evaluations=None, restarts=None, seed=None,
-             fd_step=0.05, patience=3, popsize=2, evaluation=run_deployment) -> OptimisationResult:
+             fd_step=0.05, patience=3, popsize=2, evaluation=run_deployment,
+             stop: Callable | None = None) -> OptimisationResult:
     """Choose hinge stiffnesses K so that the array deploys without collision.
 
     Minimises f(K) of :func:`~panel_deploy.optimise.evaluate.objective`
@@ -187,6 +189,9 @@ def optimise(model, settings, *, workers=None, dask_address=None, progress: Call
     evaluation : callable
         ``evaluation(model, settings) -> Outcome``, picklable, top-level;
         default simulate + collision check.
+    stop : callable, optional
+        Asked before every batch of evaluations (from the search's thread);
+        True ends the search as Ctrl-C does: status 3, the best K so far.
 
     Returns
     -------
@@ -215,7 +220,7 @@ def optimise(model, settings, *, workers=None, dask_address=None, progress: Call
     rng = np.random.default_rng(opt.seed if seed is None else seed)
     backend = make_backend(Job(model, search_settings(settings), evaluation),
                            opt.workers if workers is None else workers, dask_address)
-    search = _Search(problem, backend, max_evaluations, progress, fd_step, patience)
+    search = _Search(problem, backend, max_evaluations, progress, fd_step, patience, stop)
     start = time.perf_counter()
     try:
         converged = search.run(method, restarts, rng, popsize)
@@ -251,12 +256,12 @@ def search_settings(settings):
 class _Search:
     """State of one optimisation run: evaluator, phase, iteration counts."""
 
-    def __init__(self, problem, backend, max_evaluations, progress, fd_step, patience):
+    def __init__(self, problem, backend, max_evaluations, progress, fd_step, patience, stop=None):
         self.problem = problem
         self.patience = patience
         self.progress = progress
         self.fd_step = fd_step
-        self.evaluator = Evaluator(backend, max_evaluations, on_batch=self._report)
+        self.evaluator = Evaluator(backend, max_evaluations, on_batch=self._report, stop=stop)
         self.phase = ""
         self.iteration = 0
         self.nit = 0
@@ -443,7 +448,7 @@ class _Search:
         except BudgetExhausted:
             self.budget_spent = True
             converged = False
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, Cancelled):
             # What was evaluated is still a result: the caller can save it.
             if self.evaluator.best is None:
                 raise
@@ -453,7 +458,7 @@ class _Search:
         if reserve:
             try:
                 self.centre_damping()
-            except KeyboardInterrupt:
+            except (KeyboardInterrupt, Cancelled):
                 self.interrupted = True
         return converged
 

@@ -1,0 +1,395 @@
+"""A deployment run live: what the ROS nodes and ``panel-deploy run`` share, without ROS.
+
+The dynamics node's parameters as a validated value (:class:`DynamicsParameters`),
+the scene and model they make (:func:`configure`), the scene as the text a
+``/panel_deploy/model`` message carries (:func:`scene_yaml`, :func:`scene_from_yaml`),
+a sampled run handed out sample by sample while it is computed
+(:func:`stream_samples`), and the wall-clock pacing of simulated time
+(:class:`Pacer`).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass, replace
+from typing import NamedTuple
+
+import numpy as np
+import yaml
+
+from .build import build_model
+from .dynamics import simulate_segments
+from .dynamics.report import hinge_states
+from .dynamics.result import SimulationResult, concatenate
+from .collision import CollisionSettings
+from .collision.check import TrajectoryCheck
+from .dynamics.report import hinge_order
+from .errors import SceneError, TrajectoryError
+from .model import Model
+from .scene import INTEGRATORS, Scene, scene_from_dict
+
+#: Samples per integrator block: 50 ms of simulated time at 200 Hz, small
+#: enough that the first message leaves within milliseconds of the request.
+BLOCK_SAMPLES = 10
+
+
+@dataclass(frozen=True)
+class DynamicsParameters:
+    """What the ``dynamics`` node's parameters ask of the next deployment.
+
+    A value that keeps the scene's own is the default of each field.
+
+    Attributes
+    ----------
+    stiffness : tuple of float
+        k, N m/rad: one per stiffness group (``model.metadata["hinge_groups"]``)
+        or one per hinge (model order); empty: the scene's.
+    damping_ratio : float
+        c/k, s, for every hinge; negative: the scene's.
+    method : str
+        Integrator (``simulation.method``); empty: the scene's.
+    rtol : float
+        ``simulation.rtol`` (atol keeps its ratio to it); 0: the scene's.
+    closure : str
+        "penalty" or "exact"; empty: the scene's.
+    t_end : float
+        s; 0: the scene's.
+    rate_hz : float
+        Samples per simulated second: a run has ``round(t_end * rate_hz) + 1``.
+    real_time_factor : float
+        Simulated seconds per wall second; 0: as fast as computed.
+    """
+
+    stiffness: tuple = ()
+    damping_ratio: float = -1.0
+    method: str = ""
+    rtol: float = 0.0
+    closure: str = ""
+    t_end: float = 0.0
+    rate_hz: float = 200.0
+    real_time_factor: float = 1.0
+
+    def __post_init__(self):
+        if any(not (isinstance(k, (int, float)) and math.isfinite(k) and k >= 0)
+               for k in self.stiffness):
+            raise SceneError("stiffness", f"expected finite numbers >= 0 N m/rad, got "
+                                          f"{list(self.stiffness)}")
+        for name, low in (("damping_ratio", None), ("rtol", 0.0), ("t_end", 0.0),
+                          ("rate_hz", 0.0), ("real_time_factor", 0.0)):
+            v = getattr(self, name)
+            if not math.isfinite(v) or (low is not None and v < low):
+                raise SceneError(name, f"expected a finite number >= {low:g}, got {v!r}"
+                                 if low is not None else f"expected a finite number, got {v!r}")
+        if not self.rate_hz > 0:
+            raise SceneError("rate_hz", f"expected a number > 0, got {self.rate_hz!r}")
+        if self.method and self.method not in INTEGRATORS:
+            raise SceneError("method", f"expected one of {', '.join(INTEGRATORS)} (or empty for "
+                                       f"the scene's), got {self.method!r}")
+        if self.closure not in ("", "penalty", "exact"):
+            raise SceneError("closure", f"expected penalty or exact (or empty for the scene's), "
+                                        f"got {self.closure!r}")
+        if self.rtol >= 1:
+            raise SceneError("rtol", f"expected a relative tolerance below 1, got {self.rtol!r}")
+
+
+def apply_stiffness(model: Model, stiffness, damping_ratio: float | None = None) -> Model:
+    """``model`` with k given per stiffness group or per hinge (N m/rad).
+
+    ``damping_ratio`` (c/k, s) sets every hinge's damping; None keeps each
+    hinge's c/k. Empty ``stiffness`` keeps the model's k.
+
+    Raises
+    ------
+    SceneError
+        ``stiffness`` whose length is neither the group count nor the hinge count.
+    """
+    k = np.asarray(stiffness, dtype=float) if len(stiffness) else model.stiffness
+    groups = model.metadata.get("hinge_groups") or tuple((i,) for i in range(len(model.hinges)))
+    if k.shape == (len(groups),) and len(groups) != len(model.hinges):
+        per_hinge = np.empty(len(model.hinges))
+        for g, idx in enumerate(groups):
+            per_hinge[list(idx)] = k[g]
+        k = per_hinge
+    if k.shape != (len(model.hinges),):
+        raise SceneError("stiffness", f"expected {len(groups)} values (one per stiffness group: "
+                                      f"{_group_text(model, groups)}) or {len(model.hinges)} (one per "
+                                      f"hinge), got {k.size}")
+    c = None if damping_ratio is None else damping_ratio * k
+    return model.with_stiffness(k, c)
+
+
+def _group_text(model, groups):
+    return "; ".join(",".join(model.hinges[i].name for i in g) for g in groups)
+
+
+def configure(scene: Scene, params: DynamicsParameters) -> tuple:
+    """The scene and model a deployment with ``params`` runs: ``(scene, model)``.
+
+    Raises
+    ------
+    SceneError
+        Naming the parameter whose value the scene cannot take.
+    """
+    sim, closure = scene.simulation, scene.closure
+    if params.method:
+        sim = replace(sim, method=params.method)
+    if params.rtol:
+        sim = replace(sim, rtol=params.rtol, atol=sim.atol * params.rtol / sim.rtol)
+    if params.t_end:
+        sim = replace(sim, t_end=params.t_end)
+    samples = round(sim.t_end * params.rate_hz) + 1
+    if samples < 3:
+        raise SceneError("rate_hz", f"{params.rate_hz:g} Hz over {sim.t_end:g} s gives {samples} "
+                                    f"samples; a deployment needs at least 3")
+    if samples > 1_000_000:
+        raise SceneError("rate_hz", f"{params.rate_hz:g} Hz over {sim.t_end:g} s gives {samples} "
+                                    f"samples; at most 1000000")
+    sim = replace(sim, samples=samples)
+    if params.closure:
+        closure = replace(closure, method=params.closure)
+    scene = scene.replace(simulation=sim, closure=closure)
+    model = build_model(scene)
+    ratio = None if params.damping_ratio < 0 else params.damping_ratio
+    return scene, apply_stiffness(model, params.stiffness, ratio)
+
+
+def scene_yaml(scene: Scene, stiffness=None) -> str:
+    """The scene as YAML text, as ``/panel_deploy/model`` carries it.
+
+    ``stiffness`` (k per hinge of the scene's model, N m/rad), when given,
+    becomes ``hinges.overrides``, so that readers rebuild the same model.
+    """
+    data = dict(scene.data)
+    if stiffness is not None:
+        model = build_model(scene)
+        hinges = dict(data.get("hinges") or {})
+        hinges["overrides"] = {h.name: float(k) for h, k in zip(model.hinges, stiffness)}
+        data["hinges"] = hinges
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+def scene_from_yaml(text: str, source: str = "/panel_deploy/model") -> Scene:
+    """Parse and validate a scene sent as YAML text.
+
+    Raises
+    ------
+    SceneError
+        Text that is not YAML, or not a valid scene.
+    """
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise SceneError(source, f"not valid YAML ({str(e).splitlines()[0]})") from None
+    return scene_from_dict(data, source=source)
+
+
+class Sample(NamedTuple):
+    """One instant of a deployment, every hinge in :func:`hinge_states` order."""
+
+    t: float              #: s
+    theta: np.ndarray     #: rad
+    omega: np.ndarray     #: rad/s
+    torque: np.ndarray    #: N m
+    rotation: np.ndarray  #: (nb, 3, 3) body orientations in the ground frame
+    position: np.ndarray  #: (nb, 3) body centroids, m
+
+
+class Deployment:
+    """A deployment computed block by block and handed out sample by sample.
+
+    Iterating yields :class:`Sample` as soon as its block is integrated; the
+    blocks continue one integration, so the samples are those of
+    :func:`~panel_deploy.dynamics.simulate` with the same settings. After the
+    iteration, :attr:`result` is the whole run (what was computed, when
+    stopped early). :meth:`stop` (from any thread) ends it at the next block.
+    """
+
+    def __init__(self, model: Model, settings, block: int = BLOCK_SAMPLES):
+        self.model = model
+        self.settings = settings
+        self.block = block
+        self.names = None
+        self.blocks: list = []
+        self.stopped = False
+        #: Set by :meth:`stop`; wait on it to sleep no longer than the run lasts.
+        self.stopping = threading.Event()
+
+    def stop(self) -> None:
+        self.stopping.set()
+
+    def __iter__(self):
+        segments = simulate_segments(self.model, self.settings, segment_samples=self.block)
+        try:
+            for block in segments:
+                self.blocks.append(block)
+                names, theta, omega, torque = hinge_states(self.model, block)
+                self.names = names
+                for j in range(len(block.t)):
+                    yield Sample(float(block.t[j]), theta[j], omega[j], torque[j],
+                                 block.rotation[j], block.position[j])
+                if self.stopping.is_set():
+                    self.stopped = True
+                    return
+        finally:
+            segments.close()
+
+    @property
+    def result(self) -> SimulationResult | None:
+        """The samples computed so far as one result (None before the first block)."""
+        if not self.blocks:
+            return None
+        result = concatenate(self.blocks)
+        if self.stopped and result.success:
+            result = replace(result, success=False, status=1,
+                             message=f"stopped at t = {result.t[-1]:.6g} s")
+        return result
+
+
+class Pacer:
+    """Wall-clock pacing of simulated time: ``wait(t)`` returns when ``t`` (s,
+    simulated) is due at ``real_time_factor`` simulated seconds per wall
+    second, counting from the first call; 0 never waits."""
+
+    def __init__(self, real_time_factor: float, stop: threading.Event | None = None):
+        self.factor = real_time_factor
+        self._stop = stop or threading.Event()
+        self._origin = None
+
+    def wait(self, t: float) -> None:
+        if self.factor <= 0:
+            return
+        now = time.monotonic()
+        if self._origin is None:
+            self._origin = now - t / self.factor
+        delay = self._origin + t / self.factor - now
+        if delay > 0:
+            self._stop.wait(delay)
+
+
+def load_array(scene: str, stiffness_file: str = "") -> tuple:
+    """What the ``array_model`` node publishes: ``(scene, model, scene_text)``.
+
+    ``scene`` is a scene file or the name of a shipped scene; a
+    ``stiffness_file`` (an optimisation result) sets k per hinge, and the
+    scene text then carries it as ``hinges.overrides``.
+
+    Raises
+    ------
+    SceneError, OptimisationError
+        The scene or the stiffness file is missing or invalid.
+    """
+    from .optimise import load_hinges
+    from .scene import load_scene, resolve_scene
+
+    if not scene:
+        raise SceneError("scene", "expected a scene file or the name of a shipped scene")
+    parsed = load_scene(resolve_scene(scene))
+    model = build_model(parsed)
+    if not stiffness_file:
+        return parsed, model, scene_yaml(parsed)
+    k, _ = load_hinges(stiffness_file, model)
+    text = scene_yaml(parsed, k)
+    return scene_from_yaml(text, source=parsed.source), model.with_stiffness(k), text
+
+
+class StreamCheck:
+    """Collision check of a joint-state stream (simulator or encoders), one
+    deployment at a time.
+
+    A stamp at or before the current deployment's first one starts a new
+    deployment (a replay, or the next run); any other stamp that does not
+    move forward is refused.
+
+    Parameters
+    ----------
+    model : Model
+    settings : CollisionSettings
+
+    Attributes
+    ----------
+    names : list of str
+        Every hinge a stream may carry (tree hinges, then cut hinges).
+    required : list of str
+        The tree hinges, in coordinate order: a stream must carry these.
+    check : TrajectoryCheck or None
+        The current deployment's check (None before its first sample).
+    deployments : int
+        Deployments seen.
+    """
+
+    def __init__(self, model: Model, settings: CollisionSettings):
+        self.model = model
+        self.settings = settings
+        self.names = [model.hinges[h].name for h in hinge_order(model)]
+        self.required = self.names[:model.n_coords]
+        self.check = None
+        self.deployments = 0
+        self._first = self._last = None
+
+    def reset(self) -> None:
+        """Forget the current deployment: the next sample starts a new one."""
+        self.check = None
+
+    def update(self, t: float, theta, omega=None) -> list:
+        """Check the sample at ``t`` (s); ``theta``, ``omega`` (rad, rad/s) of
+        :attr:`required`. Returns the collision events it revealed.
+
+        Raises
+        ------
+        TrajectoryError
+            A stamp that is neither after the last nor a new deployment's;
+            the check is unchanged.
+        """
+        if self.check is not None and t <= self._first:
+            self.check = None
+        elif self.check is not None and not t > self._last:
+            raise TrajectoryError(f"header.stamp: {t:.9g} s is not after the last sample "
+                                  f"({self._last:.9g} s)")
+        if self.check is None:
+            self.check = TrajectoryCheck(self.model, self.settings)
+            self.deployments += 1
+            self._first = t
+        events = self.check.update(t, theta, omega)
+        self._last = t
+        return events
+
+    def verdict(self) -> tuple:
+        """``(level, message, values)``: level 0 no collision so far, 2 collided."""
+        c = self.check
+        if c is None:
+            return 0, "waiting for joint states", {"deployment": self.deployments}
+        values = {"deployment": self.deployments, "t": self._last, "samples": c.checked,
+                  "d": None if c.d == float("inf") else c.d, "d_pair": list(c.d_pair or ()),
+                  "d_time": None if c.d_pair is None else c.d_time,
+                  "distance_now": c.monitor.min_distance}
+        if not c.collided:
+            return 0, "no collision", values
+        e = c.first_events[0]
+        speed = c.report().v
+        values.update(first_collision_pair=list(e.names), first_collision_t=e.t,
+                      approach_speed=speed)
+        return 2, f"collision between {e.names[0]} and {e.names[1]} at t = {e.t:.4f} s", values
+
+
+
+def optimisation_scene(scene: Scene, **overrides) -> Scene:
+    """``scene`` with ``optimisation`` keys overridden (None or empty keeps the
+    scene's value), validated as a scene file's would be.
+
+    Raises
+    ------
+    SceneError
+        Naming ``optimisation.<key>`` and what was wrong.
+    """
+    from .scene import apply_overrides
+
+    given = {k: v for k, v in overrides.items() if v is not None and v != () and v != ""}
+    data = apply_overrides(scene.data, [f"optimisation.{k}={_yaml_value(v)}"
+                                        for k, v in given.items()])
+    return scene_from_dict(data, source=scene.source)
+
+
+def _yaml_value(v) -> str:
+    return yaml.safe_dump(list(v) if isinstance(v, tuple) else v, default_flow_style=True).strip()

@@ -31,12 +31,17 @@ setup(
         "matplotlib>=3.7",
     ],
     extras_require={
-        "test": ["pytest>=7", "mujoco>=3.0", "dask[distributed]>=2024.1"],
+        "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
+        "test": ["pytest>=7", "mujoco>=3.0", "dask[distributed]>=2024.1", "yourdfpy>=0.0.56"],
     },
     zip_safe=True,
     entry_points={
         "console_scripts": [
             "panel-deploy = panel_deploy.cli:main",
+            "array_model = panel_deploy.nodes:array_model",
+            "dynamics = panel_deploy.nodes:dynamics",
+            "collision_monitor = panel_deploy.nodes:collision_monitor",
+            "optimiser = panel_deploy.nodes:optimiser",
         ],
     },
 )

@@ -77,6 +77,18 @@ def cmd_bench(args):
     return work_precision_command(args, _load(args))
 
 
+def cmd_run(args):
+    from .nodes import load
+    if not args.rate > 0:
+        raise SceneError("--rate", f"expected a rate > 0 Hz, got {args.rate}")
+    if not args.real_time_factor >= 0:
+        raise SceneError("--real-time-factor", f"expected a number >= 0, got {args.real_time_factor}")
+    scene = _load(args)  # a bad scene is one line here, before any node starts
+    return load("graph").run_graph(scene, optimise=args.optimise,
+                                   real_time_factor=args.real_time_factor, rate_hz=args.rate,
+                                   as_json=args.json)
+
+
 def _stiffness_list(text):
     try:
         values = [float(x) for x in text.split(",")]
@@ -121,6 +133,17 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--t-end", type=float, help="override simulation.t_end (s)")
     _add_set(s)
     s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser("run", help="the ROS 2 node graph in one process: deploy (and optimise) live")
+    s.add_argument("scene", help="scene YAML file, or the name of a shipped scene")
+    s.add_argument("--optimise", action="store_true",
+                   help="optimise the stiffness first, then deploy with the result")
+    s.add_argument("--real-time-factor", type=float, default=1.0,
+                   help="simulated seconds per wall second (0: as fast as computed)")
+    s.add_argument("--rate", type=float, default=200.0, help="joint states per simulated second")
+    s.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    _add_set(s)
+    s.set_defaults(func=cmd_run)
 
     s = sub.add_parser("collide", help="collision check of a saved trajectory")
     s.add_argument("trajectory", help="trajectory .npz written by simulate --out")

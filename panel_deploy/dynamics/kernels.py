@@ -715,6 +715,19 @@ def cut_angles(P, R):
 
 
 @njit(cache=True)
+def cut_rates(P, R, w):
+    """Rate of every cut hinge (rad/s) for body orientations R (n + 1, 3, 3) and
+    angular velocities w (n + 1, 3), rad/s, both in kernel body order."""
+    m = P.cut_a.shape[0]
+    out = np.empty(m)
+    for j in range(m):
+        g = _cut_angle(P, j, R)[1]
+        a, b = P.cut_a[j], P.cut_b[j]
+        out[j] = g[0] * (w[b, 0] - w[a, 0]) + g[1] * (w[b, 1] - w[a, 1]) + g[2] * (w[b, 2] - w[a, 2])
+    return out
+
+
+@njit(cache=True)
 def _outer_add(out, scale, u):
     for i in range(u.shape[0]):
         for j in range(u.shape[0]):

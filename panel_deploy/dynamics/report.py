@@ -7,7 +7,8 @@ import numpy as np
 
 from ..model import Model
 from ..scene import SimulationSection
-from .kernels import hinge_law
+from .kernels import cut_rates, hinge_law
+from .pack import pack
 from .result import SimulationResult
 
 #: A hinge has left its stowed angle once |theta - theta_stowed| exceeds this, rad.
@@ -33,11 +34,11 @@ def hinge_states(model: Model, result: SimulationResult):
     """Angle, rate and torque of every hinge at every sample, as a joint-state stream carries them.
 
     Hinges are in :func:`hinge_angles` order (tree coordinates, then cut
-    hinges). A cut hinge's rate is the bodies' relative angular velocity
-    along its axis as carried by ``body_a`` (exact for a closed loop; the
-    penalty closure leaves a gap of micrometres). The torque is the hinge's
-    own law, Eq. (2)-(4): springs, dampers and joint-limit contact, N m,
-    acting on ``body_b``.
+    hinges). A cut hinge's rate is the exact time derivative of its angle
+    (the dynamics kernels' own, valid also while the penalty closure lets
+    the loop open by micrometres). The torque is the hinge's own law,
+    Eq. (2)-(4): springs, dampers and joint-limit contact, N m, acting on
+    ``body_b``.
 
     Returns
     -------
@@ -49,11 +50,11 @@ def hinge_states(model: Model, result: SimulationResult):
     s = len(result.t)
     omega = np.empty((s, len(idx)))
     omega[:, :model.n_coords] = result.omega
-    for col, h in enumerate(model.cut_hinges, start=model.n_coords):
-        hinge = model.hinges[h]
-        axis = result.rotation[:, hinge.body_a] @ hinge.axis
-        relative = result.angular_velocity[:, hinge.body_b] - result.angular_velocity[:, hinge.body_a]
-        omega[:, col] = np.einsum("ij,ij->i", axis, relative)
+    if model.cut_hinges:
+        P = pack(model)
+        for j in range(s):
+            omega[j, model.n_coords:] = cut_rates(P, result.rotation[j, P.body],
+                                                  result.angular_velocity[j, P.body])
     torque = np.empty_like(omega)
     for col, h in enumerate(idx):
         hinge = model.hinges[h]

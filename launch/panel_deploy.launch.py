@@ -1,0 +1,43 @@
+"""Start the four panel_deploy nodes with config/params.yaml.
+
+    ros2 launch panel_deploy panel_deploy.launch.py scene:=paper_4x4 real_time_factor:=1.0
+
+Arguments: scene, rate_hz, real_time_factor, use_sim_time. Then
+``ros2 service call /dynamics/deploy std_srvs/srv/Trigger`` deploys the array.
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
+
+NODES = ("array_model", "dynamics", "collision_monitor", "optimiser")
+
+
+def generate_launch_description():
+    params = os.path.join(get_package_share_directory("panel_deploy"), "config", "params.yaml")
+    arguments = [
+        DeclareLaunchArgument("scene", default_value="paper_4x4",
+                              description="scene file or shipped scene name"),
+        DeclareLaunchArgument("rate_hz", default_value="200.0",
+                              description="joint states per simulated second"),
+        DeclareLaunchArgument("real_time_factor", default_value="1.0",
+                              description="simulated seconds per wall second (0: as fast as computed)"),
+        DeclareLaunchArgument("use_sim_time", default_value="false",
+                              description="nodes take their time from /clock"),
+    ]
+    sim_time = ParameterValue(LaunchConfiguration("use_sim_time"), value_type=bool)
+    overrides = {
+        "array_model": {"scene": LaunchConfiguration("scene")},
+        "dynamics": {"rate_hz": ParameterValue(LaunchConfiguration("rate_hz"), value_type=float),
+                     "real_time_factor": ParameterValue(LaunchConfiguration("real_time_factor"),
+                                                        value_type=float)},
+    }
+    nodes = [Node(package="panel_deploy", executable=name, name=name, output="screen",
+                  parameters=[params, {"use_sim_time": sim_time, **overrides.get(name, {})}])
+             for name in NODES]
+    return LaunchDescription(arguments + nodes)

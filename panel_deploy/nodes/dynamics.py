@@ -1,0 +1,139 @@
+"""``dynamics`` node: deploys the array from the stowed state and streams it.
+
+``~/deploy`` answers at once and starts a deployment of the model last
+received on ``/panel_deploy/model`` with the current parameters; samples go
+out on ``/joint_states``, ``/panel_deploy/panels`` and ``/clock`` as they are
+computed, ``rate_hz`` per simulated second, paced by ``real_time_factor``,
+stamped with simulated time. The outcome ends on ``/diagnostics``.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import fields
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
+
+from ..errors import PanelDeployError
+from ..live import Deployment, DynamicsParameters, Pacer, configure, scene_from_yaml
+from ..summary import deployment_summary
+from . import messages, runtime
+
+_DOC = {
+    "stiffness": "k, N m/rad: one per stiffness group or one per hinge; unset or empty: the scene's",
+    "damping_ratio": "c/k of every hinge, s; negative: the scene's",
+    "method": "integrator (RK23, RK45, DOP853, Radau, BDF, LSODA, compiled); empty: the scene's",
+    "rtol": "relative tolerance of the integrator; 0: the scene's",
+    "closure": "loop closure: penalty or exact; empty: the scene's",
+    "t_end": "simulated end time, s; 0: the scene's",
+    "rate_hz": "samples published per simulated second",
+    "real_time_factor": "simulated seconds per wall second; 0: as fast as computed",
+}
+PARAMETERS = {f.name: (Parameter.Type.DOUBLE_ARRAY if f.name == "stiffness" else f.default,
+                       _DOC[f.name]) for f in fields(DynamicsParameters)}
+STATUS = "panel_deploy/dynamics"
+
+
+class DynamicsNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__("dynamics", **kwargs)
+        runtime.declare(self, PARAMETERS)
+        runtime.validator(self, self._check)
+        self.joint_states = self.create_publisher(JointState, "/joint_states", messages.STREAM)
+        self.panels = self.create_publisher(MarkerArray, "/panel_deploy/panels", messages.EVENTS)
+        self.clock = self.create_publisher(Clock, "/clock", messages.EVENTS)
+        self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", messages.EVENTS)
+        self.create_subscription(String, "/panel_deploy/model", self._on_model, messages.LATCHED)
+        self.create_service(Trigger, "~/deploy", self._deploy)
+        self.create_service(Trigger, "~/stop", self._stop)
+        self.scene = None
+        self.deployment = None  # the current or last Deployment
+        self.summary = None     # deployment_summary of the last finished run
+        self._worker = None
+
+    def parameters(self, changes=None) -> DynamicsParameters:
+        current = runtime.values(self, PARAMETERS)
+        current.update(changes or {})
+        current["stiffness"] = tuple(float(k) for k in current["stiffness"])
+        return DynamicsParameters(**current)
+
+    def _check(self, changes):
+        params = self.parameters(changes)
+        if self.scene is not None:  # counts and values the scene must accept
+            configure(self.scene, params)
+
+    def _on_model(self, msg):
+        try:
+            self.scene = scene_from_yaml(msg.data)
+        except PanelDeployError as e:
+            self.get_logger().warning(f"ignored a model: {e}")
+
+    @property
+    def running(self) -> bool:
+        return self._worker is not None and self._worker.is_alive()
+
+    def _deploy(self, request, response):
+        if self.running:
+            response.success, response.message = False, "a deployment is running; ~/stop it first"
+            return response
+        if self.scene is None:
+            response.success, response.message = False, "no model yet on /panel_deploy/model"
+            return response
+        try:
+            params = self.parameters()
+            scene, model = configure(self.scene, params)
+        except PanelDeployError as e:
+            response.success, response.message = False, str(e)
+            return response
+        self.deployment = Deployment(model, scene.simulation)
+        self._worker = threading.Thread(target=self._run, args=(self.deployment, scene, params),
+                                        daemon=True)
+        self._worker.start()
+        response.success = True
+        response.message = (f"deploying {scene.name or scene.source} to {scene.simulation.t_end:g} s "
+                            f"({scene.simulation.samples} samples)")
+        return response
+
+    def _run(self, deployment, scene, params):
+        model = deployment.model
+        pacer = Pacer(params.real_time_factor, deployment.stopping)
+        for s in deployment:
+            pacer.wait(s.t)
+            self.clock.publish(messages.clock(s.t))
+            self.joint_states.publish(messages.joint_state(deployment.names, s.t, s.theta,
+                                                           s.omega, s.torque))
+            self.panels.publish(messages.panel_markers(model, s.rotation, s.position, s.t))
+        result = deployment.result
+        self.summary = deployment_summary(model, result, flat_tol=scene.simulation.flat_tolerance)
+        s = self.summary
+        level = messages.OK if result.success and s["time_to_flat"] is not None else (
+            messages.WARN if result.success else messages.ERROR)
+        values = {k: s[k] for k in ("success", "status", "message", "time_to_flat", "t_end",
+                                    "energy_balance_error", "max_constraint_gap", "wall_time",
+                                    "nsteps")}
+        self.diagnostics.publish(messages.diagnostics(
+            float(result.t[-1]), messages.status(STATUS, level, s["message"], values)))
+
+    def _stop(self, request, response):
+        if not self.running:
+            response.success, response.message = False, "no deployment is running"
+            return response
+        self.deployment.stop()
+        response.success, response.message = True, "stopping at the end of the current block"
+        return response
+
+    def close(self):
+        if self.running:
+            self.deployment.stop()
+            self._worker.join(timeout=5.0)
+
+
+def main(argv=None) -> int:
+    return runtime.node_main(DynamicsNode, argv)

@@ -1,0 +1,159 @@
+"""``optimiser`` node: the stiffness optimisation of Eq. (8) as a service.
+
+``~/optimise`` answers at once and searches in the background on the model
+last received; progress goes to ``~/progress``, the result (YAML, as
+``panel-deploy optimise`` writes it) to ``~/result``, and a feasible K is set
+on the ``target_node``'s ``stiffness`` (and ``damping_ratio`` when searched)
+through its ``set_parameters`` service. ``~/cancel`` stops with the best K so far.
+"""
+
+from __future__ import annotations
+
+import threading
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.srv import SetParameters
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from ..build import build_model
+from ..errors import PanelDeployError
+from ..live import optimisation_scene, scene_from_yaml
+from ..optimise import optimise
+from ..optimise.io import dump_result
+from ..optimise.parallel import Cancelled
+from . import messages, runtime
+
+PARAMETERS = {
+    "max_evaluations": (0, "simulation budget; 0: the scene's optimisation.max_evaluations"),
+    "method": ("", "local or global; empty: the scene's"),
+    "workers": (1, "parallel evaluations in local processes (0: all cores, 1: in this process)"),
+    "dask_address": ("", "run the evaluations on this Dask scheduler; empty: locally"),
+    "damping_ratio_bounds": (Parameter.Type.DOUBLE_ARRAY,
+                             "[lower, upper] c/k, s, to search c/k too; unset or empty: the scene's"),
+    "seed": (-1, "random seed; negative: the scene's"),
+    "target_node": ("dynamics", "node whose stiffness (and damping_ratio) a feasible result sets"),
+}
+STATUS = "panel_deploy/optimiser"
+
+
+class OptimiserNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__("optimiser", **kwargs)
+        runtime.declare(self, PARAMETERS)
+        runtime.validator(self, lambda changes: self.scene and self._search_scene(changes))
+        self.progress = self.create_publisher(DiagnosticArray, "~/progress", messages.EVENTS)
+        self.result_pub = self.create_publisher(String, "~/result", messages.LATCHED)
+        self.create_subscription(String, "/panel_deploy/model", self._on_model, messages.LATCHED)
+        self.create_service(Trigger, "~/optimise", self._optimise)
+        self.create_service(Trigger, "~/cancel", self._cancel)
+        self._client_group = MutuallyExclusiveCallbackGroup()
+        self.scene = None
+        self.result = None  # the last OptimisationResult
+        self._cancel_event = threading.Event()
+        self._worker = None
+
+    def _search_scene(self, changes=None):
+        p = {**runtime.values(self, PARAMETERS), **(changes or {})}
+        return optimisation_scene(self.scene, max_evaluations=p["max_evaluations"] or None,
+                                  method=p["method"], damping_ratio_bounds=p["damping_ratio_bounds"],
+                                  seed=None if p["seed"] < 0 else p["seed"]), p
+
+    def _on_model(self, msg):
+        try:
+            self.scene = scene_from_yaml(msg.data)
+        except PanelDeployError as e:
+            self.get_logger().warning(f"ignored a model: {e}")
+
+    @property
+    def running(self) -> bool:
+        return self._worker is not None and self._worker.is_alive()
+
+    def _optimise(self, request, response):
+        if self.running:
+            response.success, response.message = False, "an optimisation is running; ~/cancel it first"
+            return response
+        if self.scene is None:
+            response.success, response.message = False, "no model yet on /panel_deploy/model"
+            return response
+        try:
+            scene, p = self._search_scene()
+            model = build_model(scene)
+        except PanelDeployError as e:
+            response.success, response.message = False, str(e)
+            return response
+        self._cancel_event.clear()
+        self._worker = threading.Thread(target=self._run, args=(model, scene, p), daemon=True)
+        self._worker.start()
+        response.success = True
+        response.message = f"optimising {scene.name or scene.source} ({scene.optimisation.method}, " \
+                           f"at most {scene.optimisation.max_evaluations} evaluations)"
+        return response
+
+    def _report(self, progress):
+        self.progress.publish(messages.diagnostics(progress.elapsed, messages.status(
+            STATUS, messages.OK, progress.phase,
+            {"evaluations": progress.nfev, "best_f": progress.best_f,
+             "feasible": not progress.collision and progress.reached_flat,
+             "elapsed": progress.elapsed})))
+
+    def _run(self, model, scene, p):
+        try:
+            result = optimise(model, scene, workers=p["workers"],
+                              dask_address=p["dask_address"] or None, progress=self._report,
+                              stop=self._cancel_event.is_set)
+        except Cancelled:
+            self.get_logger().info("cancelled before the first evaluation: no result")
+            return
+        except Exception as e:  # a failed search must not end the node
+            self.get_logger().error(f"optimisation failed: {e}")
+            self.progress.publish(messages.diagnostics(0.0, messages.status(
+                STATUS, messages.ERROR, f"optimisation failed: {e}")))
+            return
+        self.result = result
+        self.result_pub.publish(messages.string(dump_result(result, scene.name)))
+        self.get_logger().info(result.message)
+        if result.success:
+            self._set_target(p["target_node"], result)
+
+    def _set_target(self, target, result):
+        values = [Parameter("stiffness", Parameter.Type.DOUBLE_ARRAY, [float(k) for k in result.k])]
+        if result.problem.damping_variable:
+            values.append(Parameter("damping_ratio", Parameter.Type.DOUBLE,
+                                    float(result.c[0] / result.k[0])))
+        client = self.create_client(SetParameters, f"/{target.lstrip('/')}/set_parameters",
+                                    callback_group=self._client_group)
+        try:
+            if not client.wait_for_service(timeout_sec=5.0):
+                return self.get_logger().error(f"{target}: no set_parameters service")
+            done = threading.Event()
+            future = client.call_async(SetParameters.Request(
+                parameters=[v.to_parameter_msg() for v in values]))
+            future.add_done_callback(lambda _: done.set())
+            if not done.wait(10.0):
+                return self.get_logger().error(f"{target}: set_parameters did not answer")
+            refused = [r.reason for r in future.result().results if not r.successful]
+            if refused:
+                self.get_logger().error(f"{target} refused the result: {refused[0]}")
+        finally:
+            self.destroy_client(client)
+
+    def _cancel(self, request, response):
+        if not self.running:
+            response.success, response.message = False, "no optimisation is running"
+            return response
+        self._cancel_event.set()
+        response.success, response.message = True, "stopping after the current batch"
+        return response
+
+    def close(self):
+        self._cancel_event.set()
+        if self._worker is not None:
+            self._worker.join(timeout=30.0)
+
+
+def main(argv=None) -> int:
+    return runtime.node_main(OptimiserNode, argv)

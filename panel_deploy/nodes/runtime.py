@@ -1,0 +1,108 @@
+"""How every node starts, declares its parameters and stops.
+
+Signals: rclpy's own SIGINT handler makes ``rclpy.spin`` raise
+``ExternalShutdownException`` with a traceback, and races with shutdown; we
+install our own SIGINT/SIGTERM handlers that only set a flag, and spin in a
+``spin_once`` loop that checks it, so Ctrl-C and a service manager's SIGTERM
+end a node with exit code 0 and no traceback.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import ParameterUninitializedException
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
+
+from ..errors import PanelDeployError
+
+#: ROS parameter type of each Python default.
+_TYPES = {bool: Parameter.Type.BOOL, int: Parameter.Type.INTEGER,
+          float: Parameter.Type.DOUBLE, str: Parameter.Type.STRING}
+
+
+def declare(node, parameters: dict) -> None:
+    """Declare ``{name: (default, description)}``; a default given as a
+    ``Parameter.Type`` declares an array without a value (read as empty)."""
+    for name, (default, description) in parameters.items():
+        node.declare_parameter(name, default, ParameterDescriptor(description=description))
+
+
+def values(node, names) -> dict:
+    """Current values of parameters; an unset array parameter reads as ``()``."""
+    out = {}
+    for name in names:
+        try:
+            out[name] = node.get_parameter(name).value
+        except ParameterUninitializedException:
+            out[name] = ()
+    return out
+
+
+def validator(node, check):
+    """An on-set callback: ``check(changes)`` with ``{name: value}`` of the
+    parameters being set raises a :class:`PanelDeployError` to refuse them,
+    whose message reaches the caller as the reason."""
+    def callback(params):
+        try:
+            check({p.name: (tuple(p.value) if isinstance(p.value, (list, tuple)) or
+                            type(p.value).__name__ == "array" else p.value) for p in params})
+        except PanelDeployError as e:
+            return SetParametersResult(successful=False, reason=str(e))
+        return SetParametersResult(successful=True)
+    node.add_on_set_parameters_callback(callback)
+
+
+def spin(nodes, stop: threading.Event) -> None:
+    """Run ``nodes`` on one multi-threaded executor until ``stop`` is set."""
+    executor = MultiThreadedExecutor()
+    for node in nodes:
+        executor.add_node(node)
+    try:
+        while not stop.is_set() and rclpy.ok():
+            try:
+                executor.spin_once(timeout_sec=0.05)
+            except Exception as e:  # a failing callback must not take the node down
+                nodes[0].get_logger().error(f"callback failed: {type(e).__name__}: {e}")
+    finally:
+        for node in nodes:
+            close = getattr(node, "close", None)
+            if close is not None:
+                close()
+        executor.shutdown(timeout_sec=2.0)
+        for node in nodes:
+            node.destroy_node()
+
+
+def start(argv=None) -> threading.Event:
+    """Initialise rclpy with ``argv`` (``--ros-args`` included) and our signal
+    handlers; the returned event is set by SIGINT or SIGTERM."""
+    rclpy.init(args=sys.argv if argv is None else argv,
+               signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: stop.set())
+    return stop
+
+
+def node_main(make_node, argv=None) -> int:
+    """Body of a node executable: start, build the node, spin until a signal; exit code."""
+    stop = start(argv)
+    try:
+        node = make_node()
+    except PanelDeployError as e:
+        print(f"panel-deploy: error: {e}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    try:
+        spin([node], stop)
+    finally:
+        rclpy.try_shutdown()
+    return 0

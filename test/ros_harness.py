@@ -1,0 +1,107 @@
+"""A test client for the node tests: one rclpy context, an executor thread,
+node executables started as processes the way ``ros2 run`` starts them."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import rclpy
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from std_srvs.srv import Trigger
+
+from panel_deploy.nodes import messages
+
+BIN = Path(sys.executable).parent
+
+
+def executable(name: str) -> str:
+    path = BIN / name
+    assert path.exists(), f"{name} is not installed next to {sys.executable}"
+    return str(path)
+
+
+def wait_for(condition, timeout=20.0, what="condition"):
+    end = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.02)
+
+
+class Client:
+    """A node in the test process with a spinning executor; collects messages."""
+
+    def __init__(self, name="test_client"):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = Node(name, context=self.context)
+        self.executor = MultiThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.received = {}
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self):
+        while self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception:  # shutdown race at the end of a test module
+                return
+
+    def listen(self, msg_type, topic, qos=messages.EVENTS):
+        """The list every message on ``topic`` is appended to (one subscription per topic)."""
+        if topic not in self.received:
+            self.received[topic] = []
+            self.node.create_subscription(msg_type, topic, self.received[topic].append, qos)
+        return self.received[topic]
+
+    def call(self, srv_type, service, request=None, timeout=20.0):
+        client = self.node.create_client(srv_type, service)
+        try:
+            assert client.wait_for_service(timeout_sec=timeout), f"{service} not available"
+            future = client.call_async(request if request is not None else srv_type.Request())
+            done = threading.Event()
+            future.add_done_callback(lambda _: done.set())
+            assert done.wait(timeout), f"{service} did not answer"
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    def trigger(self, service):
+        return self.call(Trigger, service)
+
+    def close(self):
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self._thread.join(timeout=2.0)
+
+
+class NodeProcess:
+    """A node executable run as its own process with ``--ros-args``."""
+
+    def __init__(self, name, *params):
+        args = [executable(name), "--ros-args"]
+        for p in params:
+            args += ["-p", p]
+        self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     text=True, env=os.environ.copy())
+
+    def stop(self, sig=signal.SIGINT, timeout=10.0):
+        """Send ``sig``; return (exit code, seconds it took, stderr)."""
+        start = time.monotonic()
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+        try:
+            _, err = self.proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            _, err = self.proc.communicate()
+        return self.proc.returncode, time.monotonic() - start, err

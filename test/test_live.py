@@ -1,0 +1,157 @@
+"""panel_deploy.live: the ROS-free core of the nodes, checked against the batch core."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from panel_deploy.build import build_model
+from panel_deploy.collision import CollisionSettings, check_trajectory
+from panel_deploy.dynamics import simulate
+from panel_deploy.dynamics.report import hinge_states
+from panel_deploy.errors import SceneError, TrajectoryError
+from panel_deploy.live import (Deployment, DynamicsParameters, Pacer, StreamCheck, apply_stiffness,
+                               configure, optimisation_scene, scene_from_yaml, scene_yaml)
+from panel_deploy.scene import load_scene, resolve_scene
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene(resolve_scene("paper_4x4"))
+
+
+@pytest.fixture(scope="module")
+def short(scene):
+    return configure(scene, DynamicsParameters(t_end=0.5, rate_hz=200.0))
+
+
+def test_configure_sets_samples_from_the_rate(short):
+    scene, model = short
+    assert scene.simulation.t_end == 0.5 and scene.simulation.samples == 101
+
+
+def test_deployment_streams_the_batch_trajectory(short):
+    scene, model = short
+    deployment = Deployment(model, scene.simulation, block=7)
+    samples = list(deployment)
+    batch = simulate(model, scene.simulation)
+    assert len(samples) == len(batch.t) == 101
+    names, theta, omega, torque = hinge_states(model, batch)
+    assert deployment.names == names
+    got = np.array([s.theta for s in samples])
+    assert np.abs(got - theta).max() <= 1e-9
+    assert np.abs(np.array([s.omega for s in samples]) - omega).max() <= 1e-9
+    assert np.allclose(deployment.result.position, batch.position, atol=1e-9)
+
+
+def test_stopped_deployment_keeps_its_samples_and_says_so(short):
+    scene, model = short
+    deployment = Deployment(model, scene.simulation, block=5)
+    seen = 0
+    for _ in deployment:
+        seen += 1
+        if seen == 3:
+            deployment.stop()
+    result = deployment.result
+    assert len(result.t) == seen == 6  # the first block: start sample + 5
+    assert not result.success and result.status == 1 and "stopped" in result.message
+
+
+def test_hinge_states_cut_hinge_rate_is_the_angle_derivative(short):
+    from panel_deploy.dynamics import kernels
+    from panel_deploy.dynamics.pack import pack
+    from panel_deploy.kinematics import forward_kinematics
+    scene, model = short
+    result = simulate(model, scene.simulation)
+    names, theta, omega, torque = hinge_states(model, result)
+    cut = len(names) - 1
+    assert names[cut] == model.hinges[model.cut_hinges[0]].name
+    P = pack(model)
+
+    def cut_angle(q):
+        return kernels.cut_angles(P, forward_kinematics(model, q)[0][P.body])[0]
+
+    eps = 1e-6
+    for j in range(0, len(result.t), 10):
+        q, w = result.theta[j], result.omega[j]
+        derivative = (cut_angle(q + eps * w) - cut_angle(q - eps * w)) / (2 * eps)
+        assert omega[j, cut] == pytest.approx(derivative, rel=1e-6, abs=1e-7)
+        assert theta[j, cut] == pytest.approx(cut_angle(q), abs=1e-12)
+    h = model.hinges[model.joints[0]]
+    expected = -h.k_hinge * theta[:, 0] - h.c_hinge * omega[:, 0]
+    inside = (theta[:, 0] >= 0) & (theta[:, 0] <= np.pi)
+    assert inside.sum() > 10
+    assert np.allclose(torque[inside, 0], expected[inside], rtol=1e-12, atol=1e-15)
+
+
+def test_apply_stiffness_per_group_and_per_hinge(scene):
+    model = build_model(scene)
+    groups = model.metadata["hinge_groups"]
+    k = apply_stiffness(model, [0.01 * (g + 1) for g in range(len(groups))]).stiffness
+    for g, idx in enumerate(groups):
+        assert np.allclose(k[list(idx)], 0.01 * (g + 1))
+    per_hinge = np.linspace(0.01, 0.12, len(model.hinges))
+    m = apply_stiffness(model, per_hinge, damping_ratio=0.2)
+    assert np.allclose(m.stiffness, per_hinge)
+    assert np.allclose([h.c for h in m.hinges], 0.2 * per_hinge)
+    with pytest.raises(SceneError, match=r"^stiffness: expected \d+ values"):
+        apply_stiffness(model, [0.1, 0.1])
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("stiffness", (-0.1,), "stiffness"), ("stiffness", (float("nan"),), "stiffness"),
+    ("rate_hz", 0.0, "rate_hz"), ("real_time_factor", -1.0, "real_time_factor"),
+    ("method", "Euler", "method"), ("closure", "glue", "closure"), ("rtol", 2.0, "rtol"),
+    ("t_end", float("inf"), "t_end"),
+])
+def test_dynamics_parameters_name_the_bad_field(field, value, match):
+    with pytest.raises(SceneError, match=f"^{match}:"):
+        DynamicsParameters(**{field: value})
+
+
+def test_scene_text_round_trips_with_stiffness(scene):
+    model = build_model(scene)
+    k = np.linspace(0.02, 0.13, len(model.hinges))
+    again = build_model(scene_from_yaml(scene_yaml(scene, k)))
+    assert np.allclose(again.stiffness, k)
+    with pytest.raises(SceneError, match="not valid YAML"):
+        scene_from_yaml("array: [1, 2")
+
+
+def test_optimisation_scene_validates_overrides(scene):
+    s = optimisation_scene(scene, max_evaluations=7, method="", damping_ratio_bounds=(0.043, 0.3))
+    assert s.optimisation.max_evaluations == 7 and s.optimisation.damping_ratio_bounds == (0.043, 0.3)
+    assert s.optimisation.method == scene.optimisation.method
+    with pytest.raises(SceneError, match=r"optimisation\.max_evaluations"):
+        optimisation_scene(scene, max_evaluations=-3)
+
+
+def test_stream_check_matches_the_batch_check_and_restarts(short):
+    scene, model = short
+    result = simulate(model, scene.simulation)
+    settings = CollisionSettings.from_scene(scene)
+    batch = check_trajectory(model, result, settings)
+    stream = StreamCheck(model, settings)
+    for _ in range(2):  # the second pass starts again at t = 0: a new deployment
+        for j in range(len(result.t)):
+            stream.update(result.t[j], result.theta[j], result.omega[j])
+        first = stream.check.first_events[0]
+        assert first.names == batch.first_collision.names and first.t == batch.first_collision.t
+        level, message, values = stream.verdict()
+        assert level == 2 and values["first_collision_pair"] == list(first.names)
+    assert stream.deployments == 2
+    with pytest.raises(TrajectoryError, match="header.stamp"):
+        stream.update(result.t[50], result.theta[50], result.omega[50])
+
+
+def test_pacer_keeps_real_time():
+    import time
+    pacer = Pacer(2.0)
+    start = time.monotonic()
+    for t in (0.0, 0.1, 0.2):
+        pacer.wait(t)
+    assert 0.09 <= time.monotonic() - start < 0.5
+    fast = Pacer(0.0)
+    start = time.monotonic()
+    fast.wait(100.0)
+    assert time.monotonic() - start < 0.05

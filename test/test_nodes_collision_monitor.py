@@ -1,0 +1,136 @@
+"""The collision_monitor node as its own process, fed joint states by the test like encoders."""
+
+import math
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.srv import SetParameters
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+from visualization_msgs.msg import MarkerArray
+
+from panel_deploy.collision import CollisionSettings, check_trajectory
+from panel_deploy.dynamics import simulate
+from panel_deploy.dynamics.report import hinge_states
+from panel_deploy.live import DynamicsParameters, configure
+from panel_deploy.nodes import messages
+from panel_deploy.scene import load_scene, resolve_scene
+from ros_harness import Client, NodeProcess, wait_for
+
+STATUS = "panel_deploy/collision_monitor"
+
+
+@pytest.fixture(scope="module")
+def deployment():
+    scene, model = configure(load_scene(resolve_scene("paper_4x4")),
+                             DynamicsParameters(t_end=0.6, rate_hz=200.0))
+    result = simulate(model, scene.simulation)
+    report = check_trajectory(model, result, CollisionSettings.from_scene(scene))
+    return model, result, report
+
+
+@pytest.fixture(scope="module")
+def graph():
+    model = NodeProcess("array_model", "scene:=paper_4x4")
+    monitor = NodeProcess("collision_monitor")
+    client = Client("monitor_test")
+    publisher = client.node.create_publisher(JointState, "/joint_states", messages.STREAM)
+    events = client.listen(DiagnosticArray, "/panel_deploy/collision_events")
+    diagnostics = client.listen(DiagnosticArray, "/diagnostics")
+    markers = client.listen(MarkerArray, "/panel_deploy/collision_markers")
+    wait_for(lambda: publisher.get_subscription_count() >= 1, timeout=60, what="the monitor")
+    # The monitor warns about joint states until the model has reached it.
+    wait_for(lambda: any(s.name == STATUS and s.message in ("waiting for joint states", "no collision")
+                         for d in diagnostics for s in d.status), timeout=60, what="the model")
+    yield client, publisher, events, diagnostics, markers
+    client.close()
+    for p in (model, monitor):
+        code, seconds, err = p.stop()
+        assert code == 0 and "Traceback" not in err, err
+
+
+def feed(publisher, model, result, rows):
+    names, theta, omega, torque = hinge_states(model, result)
+    for j in rows:
+        publisher.publish(messages.joint_state(names, result.t[j], theta[j], omega[j], torque[j]))
+
+
+def statuses(diagnostics, level=None):
+    return [s for d in diagnostics for s in d.status
+            if s.name == STATUS and (level is None or s.level == level)]
+
+
+def test_first_event_names_the_pair_simulate_finds(graph, deployment):
+    client, publisher, events, diagnostics, markers = graph
+    model, result, report = deployment
+    events.clear()
+    feed(publisher, model, result, range(len(result.t)))
+    wait_for(lambda: events, what="a collision event")
+    first = events[0].status[0]
+    values = {kv.key: kv.value for kv in first.values}
+    assert values["pair"] == ",".join(report.first_collision.names)
+    dt = result.t[1] - result.t[0]
+    assert abs(float(values["t"]) - report.first_collision.t) <= dt
+    assert float(values["approach_speed"]) == pytest.approx(report.v, rel=1e-6)
+    wait_for(lambda: markers, what="the collision markers")
+    assert {m.text for m in markers[0].markers if m.ns == "collision"} == set(report.first_collision.names)
+    wait_for(lambda: statuses(diagnostics, messages.ERROR), what="an ERROR verdict")
+
+
+BAD = {
+    "unknown name": lambda m: m.name.__setitem__(0, "no_such_hinge"),
+    "missing name": lambda m: (m.name.pop(0), m.position.pop(0), m.velocity.pop(0), m.effort.pop(0)),
+    "wrong length": lambda m: m.position.pop(),
+    "NaN": lambda m: m.position.__setitem__(1, math.nan),
+    "stamp out of order": lambda m: setattr(m.header, "stamp", messages.stamp(0.05)),
+}
+
+
+def test_malformed_joint_states_warn_and_the_verdict_stays_right(graph, deployment):
+    client, publisher, events, diagnostics, markers = graph
+    model, result, report = deployment
+    names, theta, omega, torque = hinge_states(model, result)
+    n = len(result.t)
+    events.clear()
+    feed(publisher, model, result, range(0, n // 2))
+    wait_for(lambda: statuses(diagnostics), what="diagnostics")
+    diagnostics.clear()
+    j = n // 2
+    for spoil in BAD.values():
+        msg = messages.joint_state(names, result.t[j], theta[j], omega[j], torque[j])
+        msg.name, msg.position, msg.velocity, msg.effort = (list(msg.name), list(msg.position),
+                                                           list(msg.velocity), list(msg.effort))
+        spoil(msg)
+        publisher.publish(msg)
+    wait_for(lambda: len(statuses(diagnostics, messages.WARN)) >= len(BAD), what="one WARN each")
+    warns = [s.message for s in statuses(diagnostics, messages.WARN)]
+    for needle in ("unknown joint", "missing joint", "values for", "not finite", "header.stamp"):
+        assert any(needle in w for w in warns), (needle, warns)
+    feed(publisher, model, result, range(j, n))
+    wait_for(lambda: events, what="the collision after the bad messages")
+    values = {kv.key: kv.value for kv in events[0].status[0].values}
+    assert values["pair"] == ",".join(report.first_collision.names)
+    assert abs(float(values["t"]) - report.first_collision.t) <= result.t[1] - result.t[0]
+
+
+def test_reset_starts_a_new_deployment(graph, deployment):
+    client, publisher, events, diagnostics, markers = graph
+    model, result, report = deployment
+    assert client.trigger("/collision_monitor/reset").success
+    diagnostics.clear()
+    feed(publisher, model, result, range(0, 20))  # before the collision: OK again
+    wait_for(lambda: any(s.level == messages.OK and {kv.key: kv.value for kv in s.values}
+                         .get("samples") == "20" for s in statuses(diagnostics)),
+             what="an OK verdict of the new deployment")
+
+
+@pytest.mark.parametrize("param, reason", [
+    (Parameter("tolerance", value=float("inf")), "tolerance"),
+    (Parameter("tolerance", value=float("nan")), "tolerance"),
+])
+def test_invalid_tolerance_is_rejected(graph, param, reason):
+    client = graph[0]
+    result, = client.call(SetParameters, "/collision_monitor/set_parameters",
+                          SetParameters.Request(parameters=[param.to_parameter_msg()])).results
+    assert not result.successful and reason in result.reason

@@ -1,0 +1,72 @@
+"""``panel-deploy run``: the whole graph in one process, end to end, as a user runs it."""
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from panel_deploy.collision import CollisionSettings, check_trajectory
+from panel_deploy.dynamics import simulate
+from panel_deploy.live import DynamicsParameters, configure
+from panel_deploy.scene import load_scene, resolve_scene
+
+CLI = str(Path(sys.executable).parent / "panel-deploy")
+
+
+def test_run_paper_scene_matches_simulate():
+    proc = subprocess.run([CLI, "run", "paper_4x4", "--real-time-factor", "0", "--json",
+                           "--set", "simulation.t_end=0.6"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1, proc.stderr  # the paper's uniform k collides
+    summary = json.loads(proc.stdout)
+    scene, model = configure(load_scene(resolve_scene("paper_4x4"), ["simulation.t_end=0.6"]),
+                             DynamicsParameters(rate_hz=200.0))
+    report = check_trajectory(model, simulate(model, scene.simulation),
+                              CollisionSettings.from_scene(scene))
+    first = summary["collision"]["first_collision"]
+    assert first["pair"] == list(report.first_collision.names)
+    assert abs(first["t"] - report.first_collision.t) <= 0.005
+    assert "t = " in proc.stderr and "collision" in proc.stderr
+
+
+def test_run_optimise_then_deploys_flat_without_collision():
+    proc = subprocess.run([CLI, "run", "paper_4x4", "--optimise", "--real-time-factor", "0",
+                           "--set", "optimisation.damping_ratio_bounds=[0.043,0.3]",
+                           "--set", "optimisation.max_evaluations=12",
+                           "--set", "optimisation.method=local"],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stdout.startswith("ok:") and "no collision" in proc.stdout
+    assert "optimise" in proc.stderr
+
+
+def test_run_interrupted_prints_what_was_computed():
+    proc = subprocess.Popen([CLI, "run", "paper_4x4"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    line = ""
+    while "t = " not in line and time.monotonic() < deadline:  # the deployment is under way
+        line = proc.stderr.readline()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130 and "Traceback" not in err, err
+    assert "simulated to" in out and "interrupted" in err
+
+
+def test_bad_scene_is_one_line_before_any_node_starts():
+    proc = subprocess.run([CLI, "run", "paper_4x4", "--set", "simulation.rtol=-1"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().startswith("panel-deploy: error:") and "simulation.rtol" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("flag, value", [("--rate", "0"), ("--real-time-factor", "-1")])
+def test_bad_flags_are_one_line(flag, value):
+    proc = subprocess.run([CLI, "run", "paper_4x4", flag, value], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 2 and proc.stderr.startswith(f"panel-deploy: error: {flag}")

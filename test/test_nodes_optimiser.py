@@ -1,0 +1,92 @@
+"""The optimiser node as its own process: background search, progress, result, target set, cancel."""
+
+import pytest
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.srv import GetParameters, SetParameters
+from rclpy.parameter import Parameter
+from std_msgs.msg import String
+
+from panel_deploy.nodes import messages
+from ros_harness import Client, NodeProcess, wait_for
+
+# c/k searched too (the paper's lubricant): feasible K within a few evaluations.
+LUBRICANT = [0.043, 0.3]
+
+
+@pytest.fixture(scope="module")
+def graph():
+    procs = [NodeProcess("array_model", "scene:=paper_4x4"), NodeProcess("dynamics"),
+             NodeProcess("optimiser", "max_evaluations:=12", "method:=local",
+                         f"damping_ratio_bounds:=[{LUBRICANT[0]},{LUBRICANT[1]}]")]
+    client = Client("optimiser_test")
+    progress = client.listen(DiagnosticArray, "/optimiser/progress")
+    results = client.listen(String, "/optimiser/result", messages.LATCHED)
+    yield client, progress, results
+    client.close()
+    for p in procs:
+        code, seconds, err = p.stop()
+        assert code == 0 and "Traceback" not in err, err
+
+
+def optimise(client):
+    replies = []
+
+    def attempt():
+        replies.append(client.trigger("/optimiser/optimise"))
+        return replies[-1].success or "no model" not in replies[-1].message
+    wait_for(attempt, timeout=60, what="the model to reach the optimiser")
+    return replies[-1]
+
+
+def stiffness(client):
+    reply = client.call(GetParameters, "/dynamics/get_parameters",
+                        GetParameters.Request(names=["stiffness", "damping_ratio"]))
+    return list(reply.values[0].double_array_value), reply.values[1].double_value
+
+
+def test_optimise_reports_progress_and_sets_the_target(graph):
+    client, progress, results = graph
+    before = stiffness(client)
+    reply = optimise(client)
+    assert reply.success, reply.message
+    second = client.trigger("/optimiser/optimise")
+    assert not second.success and "running" in second.message
+    wait_for(lambda: results, timeout=120, what="a result")
+    result = yaml.safe_load(results[-1].data)
+    assert progress and {kv.key for kv in progress[0].status[0].values} >= {
+        "evaluations", "best_f", "feasible", "elapsed"}
+    assert result["success"], result["message"]
+    k = [result["hinges"][name]["k"] for name in result["hinges"]]
+    wait_for(lambda: stiffness(client) != before, what="the dynamics node's stiffness to change")
+    after, ratio = stiffness(client)
+    assert after == pytest.approx(k)  # per hinge, in model order
+    assert LUBRICANT[0] <= ratio <= LUBRICANT[1]
+
+
+def test_cancel_stops_with_the_best_so_far(graph):
+    client, progress, results = graph
+    set_reply = client.call(SetParameters, "/optimiser/set_parameters", SetParameters.Request(
+        parameters=[Parameter("max_evaluations", value=400).to_parameter_msg(),
+                    Parameter("damping_ratio_bounds", Parameter.Type.DOUBLE_ARRAY, [])
+                    .to_parameter_msg()]))
+    assert all(r.successful for r in set_reply.results)
+    results.clear()
+    progress.clear()
+    assert optimise(client).success
+    wait_for(lambda: progress, timeout=60, what="progress")
+    assert client.trigger("/optimiser/cancel").success
+    wait_for(lambda: results, timeout=60, what="the result after cancel")
+    result = yaml.safe_load(results[-1].data)
+    assert result["status"] == 3 and result["nfev"] < 400
+
+
+def test_invalid_parameters_are_rejected(graph):
+    client, *_ = graph
+    for param, reason in ((Parameter("max_evaluations", value=-4), "max_evaluations"),
+                          (Parameter("method", value="annealing"), "method"),
+                          (Parameter("damping_ratio_bounds", Parameter.Type.DOUBLE_ARRAY, [0.3, 0.1]),
+                           "damping_ratio_bounds")):
+        result, = client.call(SetParameters, "/optimiser/set_parameters",
+                              SetParameters.Request(parameters=[param.to_parameter_msg()])).results
+        assert not result.successful and reason in result.reason, result.reason

@@ -1,0 +1,81 @@
+"""Packaging of the ROS side: executables, launch file, params.yaml, package.xml, import rules."""
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+from xml.etree import ElementTree
+
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+NODES = ("array_model", "dynamics", "collision_monitor", "optimiser")
+THIRD_PARTY = {"numpy", "scipy", "yaml", "panel_deploy"}
+
+
+def imported_top_modules(paths):
+    found = set()
+    for path in paths:
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                found |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                found.add(node.module.split(".")[0])
+    return found - set(sys.stdlib_module_names) - THIRD_PARTY
+
+
+def test_every_node_executable_is_installed():
+    for name in NODES + ("panel-deploy",):
+        assert (Path(sys.executable).parent / name).exists(), name
+
+
+def test_launch_file_compiles_and_names_installed_executables():
+    source = (ROOT / "launch" / "panel_deploy.launch.py").read_text()
+    compile(source, "panel_deploy.launch.py", "exec")
+    tree = ast.parse(source)
+    nodes = next(n.value for n in tree.body if isinstance(n, ast.Assign)
+                 and getattr(n.targets[0], "id", "") == "NODES")
+    assert tuple(ast.literal_eval(nodes)) == NODES
+    arguments = {c.args[0].value for c in ast.walk(tree) if isinstance(c, ast.Call)
+                 and getattr(c.func, "id", "") == "DeclareLaunchArgument"}
+    assert arguments == {"scene", "rate_hz", "real_time_factor", "use_sim_time"}
+
+
+def test_params_yaml_keys_are_declared_parameters():
+    from panel_deploy.nodes import load
+    params = yaml.safe_load((ROOT / "config" / "params.yaml").read_text())
+    assert set(params) == set(NODES)
+    for name in NODES:
+        declared = load(name).PARAMETERS
+        given = params[name]["ros__parameters"]
+        assert set(given) <= set(declared), set(given) - set(declared)
+        for key, value in given.items():
+            default = declared[key][0]
+            assert value == default, (name, key)  # the file documents the defaults
+
+
+def test_package_xml_exec_depends_are_exactly_the_ros_imports():
+    root = ElementTree.parse(ROOT / "package.xml").getroot()
+    ros_depends = {e.text for e in root.findall("exec_depend") if not e.text.startswith("python3-")}
+    imports = imported_top_modules([*(ROOT / "panel_deploy" / "nodes").glob("*.py"),
+                                    *(ROOT / "launch").glob("*.py")])
+    assert ros_depends == imports
+
+
+def test_the_core_never_imports_ros():
+    core = [p for p in (ROOT / "panel_deploy").rglob("*.py") if "nodes" not in p.parts]
+    ros = {"rclpy", "std_msgs", "sensor_msgs", "diagnostic_msgs", "visualization_msgs",
+           "geometry_msgs", "rosgraph_msgs", "std_srvs", "rcl_interfaces", "builtin_interfaces",
+           "launch", "launch_ros"}
+    for path in core:
+        assert not imported_top_modules([path]) & ros, path
+
+
+def test_ros_command_without_rclpy_says_how_to_install():
+    code = ("import sys; sys.modules['rclpy'] = None; from panel_deploy.cli import main; "
+            "sys.exit(main(['run', 'paper_4x4']))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.strip().splitlines() == [proc.stderr.strip()]
+    assert 'pip install "panel_deploy[ros]"' in proc.stderr

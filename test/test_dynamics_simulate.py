@@ -6,11 +6,13 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from panel_deploy.build import build_model
 from panel_deploy.dynamics import simulate, simulate_segments
+from panel_deploy.dynamics.result import concatenate
 from panel_deploy.errors import ModelError
 from panel_deploy.kinematics import axis_rotation
 from panel_deploy.model import State
-from panel_deploy.scene import SimulationSection
+from panel_deploy.scene import SimulationSection, load_scene, resolve_scene
 
 from test_dynamics_helpers import plate_on_hinge, random_branched
 
@@ -133,9 +135,9 @@ def test_bad_state_is_misuse():
 
 @pytest.mark.parametrize("method", ["RK45", "compiled"])
 def test_segments_continue_one_run(method):
-    # Blocks of 7 samples restart the integrator on the previous block's last
-    # sample: the grid is the one-shot run's, the angles agree to the tolerance
-    # and the closed form holds across the block boundaries.
+    # Blocks of 7 samples continue one integration: the grid and the samples
+    # are the one-shot run's, bit for bit, and the closed form holds across
+    # the block boundaries.
     model = plate_on_hinge(gravity=(0.0, 0.0, 9.81))
     settings = SimulationSection(t_end=0.5, method=method, rtol=1e-9, atol=1e-11, samples=51)
     whole = simulate(model, settings)
@@ -144,12 +146,12 @@ def test_segments_continue_one_run(method):
     t = np.concatenate([b.t for b in blocks])
     theta = np.concatenate([b.theta for b in blocks])
     np.testing.assert_array_equal(t, whole.t)
-    np.testing.assert_allclose(theta, whole.theta, atol=1e-7)
+    np.testing.assert_array_equal(theta, whole.theta)
     np.testing.assert_allclose(theta[:, 0], plate_reference(model, np.pi, t)[0], atol=1e-7)
     assert all(b.success for b in blocks)
     # Dissipated energy is carried across blocks, not restarted.
     E = np.concatenate([b.energy["dissipated"] for b in blocks])
-    np.testing.assert_allclose(E, whole.energy["dissipated"], rtol=1e-6, atol=1e-12)
+    np.testing.assert_array_equal(E, whole.energy["dissipated"])
 
 
 def test_segments_stop_at_a_failure_and_share_one_budget():
@@ -166,3 +168,84 @@ def test_segments_stop_at_a_failure_and_share_one_budget():
 def test_segment_size_is_checked(bad):
     with pytest.raises(ModelError, match="segment_samples"):
         next(simulate_segments(plate_on_hinge(), SimulationSection(), segment_samples=bad))
+
+
+# --- blocks are one integration: joined, they are simulate() bit for bit ---
+
+PER_SAMPLE = ("t", "theta", "omega", "rotation", "position", "linear_velocity",
+              "angular_velocity", "constraint_gap", "closure_sigma_min")
+
+
+def assert_same_run(blocks, whole):
+    joined = concatenate(blocks)
+    for name in PER_SAMPLE:
+        assert np.array_equal(getattr(joined, name), getattr(whole, name)), name
+    assert joined.energy.keys() == whole.energy.keys()
+    for name in whole.energy:
+        assert np.array_equal(joined.energy[name], whole.energy[name]), name
+    assert np.array_equal(joined.extra["cut_theta"], whole.extra["cut_theta"])
+    for name in ("nfev", "njev", "nlu", "nsteps"):
+        assert getattr(joined, name) == getattr(whole, name), name
+    assert joined.extra["switches"] == whole.extra["switches"]
+    assert joined.extra["scheme"] == whole.extra["scheme"]
+    assert (joined.success, joined.status, joined.message) == (
+        whole.success, whole.status, whole.message)
+    assert all(b.success for b in blocks[:-1])
+
+
+@pytest.fixture(scope="module")
+def paper():
+    scene = load_scene(resolve_scene("paper_4x4"))
+    return build_model(scene), scene.simulation
+
+
+@pytest.mark.parametrize("method, scheme, t_end, samples, block", [
+    ("compiled", "auto", 0.5, 101, 7),      # ROS34PW2 on the paper scene
+    ("compiled", "dopri5", 0.5, 101, 7),
+    ("RK45", "auto", 0.05, 21, 4),
+    ("Radau", "auto", 0.03, 13, 4),
+])
+def test_paper_segments_are_simulate_bit_for_bit(paper, method, scheme, t_end, samples, block):
+    model, sim = paper
+    settings = dataclasses.replace(sim, method=method, t_end=t_end, samples=samples)
+    whole = simulate(model, settings, compiled_scheme=scheme)
+    assert whole.success, whole.message
+    if method == "compiled":
+        assert whole.extra["scheme"] == ("ros34pw2" if scheme == "auto" else scheme)
+    blocks = list(simulate_segments(model, settings, segment_samples=block,
+                                    compiled_scheme=scheme))
+    last = samples - 1
+    assert [len(b.t) for b in blocks] == (
+        [block + 1] + [block] * ((last - 1) // block - 1) + [last - (last - 1) // block * block])
+    assert all(b.nsteps > 0 for b in blocks)
+    assert sum(b.nsteps for b in blocks) == whole.nsteps
+    assert_same_run(blocks, whole)
+
+
+def test_ros34pw2_steps_past_a_block():
+    # A long ROS34PW2 step fills several 1-sample blocks at once: the blocks it
+    # filled ahead cost no steps, and the run is still simulate()'s.
+    model = plate_on_hinge(c=0.02)
+    state = State(0.0, np.array([1.0]), np.zeros(1))
+    settings = SimulationSection(t_end=0.3, method="compiled", rtol=1e-4, atol=1e-6, samples=61)
+    whole = simulate(model, settings, state, compiled_scheme="ros34pw2")
+    blocks = list(simulate_segments(model, settings, state, segment_samples=1,
+                                    compiled_scheme="ros34pw2"))
+    assert [len(b.t) for b in blocks] == [2] + [1] * 59
+    assert any(b.nsteps == 0 for b in blocks)
+    assert_same_run(blocks, whole)
+
+
+@pytest.mark.parametrize("method, scheme, t_end, max_steps", [
+    ("compiled", "auto", 0.5, 700), ("compiled", "dopri5", 0.5, 2000), ("RK45", "auto", 0.05, 600)])
+def test_paper_segments_fail_where_simulate_fails(paper, method, scheme, t_end, max_steps):
+    model, sim = paper
+    settings = dataclasses.replace(sim, method=method, t_end=t_end, samples=101)
+    whole = simulate(model, settings, max_steps=max_steps, compiled_scheme=scheme)
+    assert not whole.success and "budget" in whole.message
+    assert 8 < len(whole.t) < 101  # it fails after the first block
+    blocks = list(simulate_segments(model, settings, segment_samples=7, max_steps=max_steps,
+                                    compiled_scheme=scheme))
+    assert not blocks[-1].success and blocks[-1].status == -1
+    assert sum(b.nsteps for b in blocks) == whole.nsteps == max_steps
+    assert_same_run(blocks, whole)

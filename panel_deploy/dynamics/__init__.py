@@ -2,8 +2,8 @@
 penalty or exact loop closure, scipy or compiled integrators.
 
 ``simulate(model, settings, state=None) -> SimulationResult``, or the same run
-in blocks of samples with ``simulate_segments`` (for consumers that stop
-early); reports from a result: ``hinge_release_report``, ``summary``,
+(bit for bit) in blocks of samples with ``simulate_segments`` (for consumers
+that stream it or stop early); reports from a result: ``hinge_release_report``, ``summary``,
 ``energy_balance_error``.
 """
 

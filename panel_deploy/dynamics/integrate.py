@@ -13,6 +13,11 @@ after a located one: a hinge resting on its limit chatters across it, and
 locating every crossing would stall the run (Zeno), as it did at t = 0 on the
 paper scene. Cut-hinge angles are not state
 variables, so their switches are not located.
+
+A run can be handed out in blocks of samples (:func:`integrate_blocks`): the
+integrator pauses after the step that fills a block's last sample and resumes
+from its own state (the compiled loop's carry, or the live scipy solver), so
+the blocks joined are the uninterrupted run bit for bit.
 """
 
 from __future__ import annotations
@@ -176,8 +181,9 @@ SCHEMES = {"dopri5": DOPRI5, "ros34pw2": ROS34PW2}
 
 
 @njit(cache=True)
-def compiled_loop(P, y0, t_eval, rtol, atol, max_step, locate, max_steps, gap_limit, scheme):
-    """Adaptive integration with the whole loop compiled.
+def compiled_loop(P, t_eval, Y, j, j_stop, carry, counts, rtol, atol, max_step, locate,
+                  max_steps, gap_limit, scheme):
+    """Adaptive integration with the whole loop compiled, resumable.
 
     DOPRI5 steps exactly onto every t_eval[j]. ROS34PW2 steps freely and fills
     the samples it passes by cubic Hermite interpolation of y and f at the step
@@ -191,43 +197,64 @@ def compiled_loop(P, y0, t_eval, rtol, atol, max_step, locate, max_steps, gap_li
     of every step; the first stage reuses f(y), so a step costs 4 RHS calls,
     the stiff Jacobian and one n x n LU.
 
-    Returns (Y, status, code, nfev, njev, nlu, nsteps, nswitches); Y rows past a
-    failure are NaN and cut off by the caller. code: 0 ok, 1 step collapse,
-    2 non-finite state, 3 gap above gap_limit, 4 max_steps.
+    One run may take several calls. ``Y`` (s, N) is the run's sample array
+    (``Y[0]`` the start state, unfilled rows NaN), ``j`` the next sample to
+    fill; the call returns after the accepted step that fills sample
+    ``j_stop`` (ROS34PW2 may fill several past it in that step), on failure,
+    or at t_eval[-1]. ``carry`` (2 + 2N,) float holds t, h, y and f = rhs(y);
+    ``counts`` (7,) int64 holds nfev, njev, nlu, nsteps, nswitches and the
+    landed and rejected flags, all totals over the run. Both are updated in
+    place, so the next call (with the returned j) continues exactly as one
+    uninterrupted call would; the Jacobian blocks need no carrying, as they
+    are stale after an accepted step. A first call passes ``carry`` = (t0, 0,
+    y0, 0...) and zero ``counts``: nfev == 0 marks the start, where f(y0) and
+    the starting step are computed. ``max_steps`` bounds the run's total
+    nsteps.
+
+    Returns (j, status, code): j the next sample to fill; status 0 ok
+    (j > j_stop, or j == s at the end), -1 failure with code: 1 step
+    collapse, 2 non-finite state, 3 gap above gap_limit, 4 max_steps (rows of
+    Y from j on stay NaN).
     """
-    N = y0.shape[0]
+    N = Y.shape[1]
     n = P.n
     s = t_eval.shape[0]
-    Y = np.full((s, N), np.nan)
-    Y[0] = y0
-    y = y0.copy()
-    t = t_eval[0]
-    f = kernels.rhs(P, y)
-    nfev = 1
-    njev = 0
-    nlu = 0
+    t = carry[0]
+    h = carry[1]
+    y = carry[2:2 + N].copy()
+    f = carry[2 + N:2 + 2 * N].copy()
+    nfev = counts[0]
+    njev = counts[1]
+    nlu = counts[2]
+    nsteps = counts[3]
+    nswitches = counts[4]
+    landed = counts[5] != 0  # the last step was shortened onto a switch: do not locate in the next
+    rejected = counts[6] != 0  # the last attempt was rejected by the error test
     implicit = scheme == ROS34PW2
     expo = -1.0 / (rosenbrock.ERROR_ORDER if implicit else 5)
-    # Hairer, Norsett & Wanner (II.4) starting step
-    sc = np.empty(N)
-    for i in range(N):
-        sc[i] = atol + rtol * abs(y[i])
-    d0 = math.sqrt(np.mean((y / sc) ** 2))
-    d1 = math.sqrt(np.mean((f / sc) ** 2))
-    h = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-    h = min(h, max_step)
+    if nfev == 0:
+        f = kernels.rhs(P, y)
+        nfev = 1
+        # Hairer, Norsett & Wanner (II.4) starting step
+        sc = np.empty(N)
+        for i in range(N):
+            sc[i] = atol + rtol * abs(y[i])
+        d0 = math.sqrt(np.mean((y / sc) ** 2))
+        d1 = math.sqrt(np.mean((f / sc) ** 2))
+        h = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+        h = min(h, max_step)
     K = np.empty((7, N))
     A = np.zeros((n, n))
     B = np.zeros((n, n))
     fresh = False  # A, B were taken at the current y (a rejected step keeps them)
-    nsteps = 0
-    nswitches = 0
-    landed = False  # the last step was shortened onto a switch: do not locate in the next
-    rejected = False  # the last attempt was rejected by the error test
-    j = 1
+    status = 0
+    code = 0
     while j < s:
         if not np.all(np.isfinite(f)):
-            return Y, -1, 2, nfev, njev, nlu, nsteps, nswitches
+            status, code = -1, 2
+            break
+        if j > j_stop:
+            break
         target = t_eval[-1] if implicit else t_eval[j]
         step = min(h, max_step, target - t)
         lands = step == target - t
@@ -275,9 +302,11 @@ def compiled_loop(P, y0, t_eval, rtol, atol, max_step, locate, max_steps, gap_li
                     j += 1
             nsteps += 1
             if gap_limit > 0.0 and max_gap(P, y) > gap_limit:
-                return Y, -1, 3, nfev, njev, nlu, nsteps, nswitches
+                status, code = -1, 3
+                break
             if nsteps >= max_steps:
-                return Y, -1, 4, nfev, njev, nlu, nsteps, nswitches
+                status, code = -1, 4
+                break
             grow = min(10.0, 0.9 * en ** expo) if en > 0 else 10.0
             # After a rejection do not grow again at once (Hairer & Wanner II.4):
             # the error estimate just said the step was too long.
@@ -285,8 +314,20 @@ def compiled_loop(P, y0, t_eval, rtol, atol, max_step, locate, max_steps, gap_li
             rejected = False
             continue
         if h < 10.0 * np.finfo(np.float64).eps * max(1.0, abs(t)):
-            return Y, -1, 1, nfev, njev, nlu, nsteps, nswitches
-    return Y, 0, 0, nfev, njev, nlu, nsteps, nswitches
+            status, code = -1, 1
+            break
+    carry[0] = t
+    carry[1] = h
+    carry[2:2 + N] = y
+    carry[2 + N:2 + 2 * N] = f
+    counts[0] = nfev
+    counts[1] = njev
+    counts[2] = nlu
+    counts[3] = nsteps
+    counts[4] = nswitches
+    counts[5] = 1 if landed else 0
+    counts[6] = 1 if rejected else 0
+    return j, status, code
 
 
 _CODES = {1: "step size collapsed", 2: "non-finite state or derivative",
@@ -322,28 +363,56 @@ def choose_scheme(P, y0) -> str:
     return "ros34pw2" if 3.3 / stiffness(P, y0) < STIFF_STEP else "dopri5"
 
 
-def integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit, scheme) -> Integration:
+def _leading_finite(rows, done, upto):
+    """Advance ``done`` over the finite rows of ``rows`` below ``upto``."""
+    while done < upto and np.all(np.isfinite(rows[done])):
+        done += 1
+    return done
+
+
+def integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit, scheme, stops):
+    """:func:`compiled_loop` called once per block of samples (see :func:`integrate_blocks`)."""
     scheme = choose_scheme(P, y0) if scheme == "auto" else scheme
-    Y, status, code, nfev, njev, nlu, nsteps, nsw = compiled_loop(
-        P, y0, t_eval, settings.rtol, settings.atol, settings.max_step, settings.events,
-        max_steps, gap_limit, SCHEMES[scheme])
-    done = int(np.all(np.isfinite(Y), axis=1).cumprod().sum())
-    msg = "reached t_end" if status == 0 else (
-        f"{_CODES[code]} at t = {t_eval[done - 1]:.6g} s (last sample); integration stopped")
-    return Integration(Y[:done], status, msg, nfev, njev, nlu, nsteps, nsw, scheme)
+    s, N = len(t_eval), len(y0)
+    Y = np.full((s, N), np.nan)
+    Y[0] = y0
+    carry = np.zeros(2 + 2 * N)
+    carry[0] = t_eval[0]
+    carry[2:2 + N] = y0
+    counts = np.zeros(7, dtype=np.int64)
+    before = counts[:5].copy()
+    j, lo, done = 1, 0, 0
+    for stop in stops:
+        status = code = 0
+        if j <= stop:  # else ROS34PW2 filled this block already
+            j, status, code = compiled_loop(
+                P, t_eval, Y, j, int(stop), carry, counts, settings.rtol, settings.atol,
+                settings.max_step, settings.events, max_steps, gap_limit, SCHEMES[scheme])
+        done = _leading_finite(Y, done, j)
+        hi = min(stop + 1, done) if status == 0 else done
+        msg = "reached t_end" if status == 0 else (
+            f"{_CODES[code]} at t = {t_eval[done - 1]:.6g} s (last sample); integration stopped")
+        nfev, njev, nlu, nsteps, nsw = (int(c) for c in counts[:5] - before)
+        before = counts[:5].copy()
+        yield Integration(Y[lo:max(lo, hi)], status, msg, nfev, njev, nlu, nsteps, nsw, scheme)
+        lo = max(lo, hi)
+        if status != 0:
+            return
 
 
 # --- scipy OdeSolver driver ---
 
-def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit) -> Integration:
-    """Drive a scipy OdeSolver step by step, sampling by dense output.
+def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit, stops):
+    """Drive a scipy OdeSolver step by step, sampling by dense output; a
+    generator of blocks as :func:`integrate_blocks`, the solver kept alive
+    across them.
 
     A step that crosses a contact switch (when ``settings.events``) is
     discarded and redone by a new solver started at the step's beginning with
     ``t_bound`` at the switch; then a new solver continues from the switch.
     """
     cls = SCIPY_METHODS[settings.method]
-    n = P.n
+    n, N = P.n, len(y0)
     counts = {"nfev": 0, "njev": 0}
 
     def fun(t, y):
@@ -361,55 +430,62 @@ def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit) -> Integratio
     t_end = t_eval[-1]
     out = [y0]
     j = 1
+    lo = done = 0
     nsteps = nlu = nsw = 0
+    before = (0, 0, 0, 0, 0)
     status, message = 0, "reached t_end"
     t, y, bound = t_eval[0], y0, t_end
     solver = cls(fun, t, y, bound, **opts)
     landed = False  # as in dopri5: after a located switch the next step is free
-    while j < len(t_eval):
-        if solver.status == "finished":
-            nlu += getattr(solver, "nlu", 0)
-            t, y, bound = solver.t, solver.y, t_end
-            solver = cls(fun, t, y, bound, **opts)
-            continue
-        t_old, y_old = solver.t, solver.y.copy()
-        msg = solver.step()
-        if solver.status == "failed":
-            status, message = -1, f"{settings.method} failed at t = {t_old:.6g} s: {msg}"
-            break
-        y_new = solver.y
-        if not np.all(np.isfinite(y_new)):
-            status, message = -1, f"non-finite state at t = {solver.t:.6g} s"
-            break
-        nsteps += 1
-        if settings.events and not landed:
-            frac = first_switch(n, y_old, y_new, solver.t - t_old, settings.atol)
-            if EDGE < frac < 1.0 - EDGE:
-                dt = solver.t - t_old
-                t_sw = _refine_switch(solver.dense_output(), n, y_old, y_new, t_old, solver.t, frac)
-                if EDGE * dt < t_sw - t_old < (1.0 - EDGE) * dt:
-                    nsw += 1
-                    nlu += getattr(solver, "nlu", 0)
-                    solver = cls(fun, t_old, y_old, t_sw, **opts)
-                    landed = True
-                    continue
-        landed = False
-        sol = solver.dense_output()
-        while j < len(t_eval) and t_eval[j] <= solver.t:
-            out.append(sol(t_eval[j]))
-            j += 1
-        if gap_limit > 0 and max_gap(P, solver.y) > gap_limit:
-            status, message = -1, (f"loop-closure gap {max_gap(P, solver.y):.3g} m exceeded "
-                                   f"the limit {gap_limit:.3g} m at t = {solver.t:.6g} s")
-            break
-        if nsteps >= max_steps:
-            status, message = -1, f"step budget ({max_steps}) exhausted at t = {solver.t:.6g} s"
-            break
-    nlu += getattr(solver, "nlu", 0)
-    Y = np.array(out)
-    finite = np.all(np.isfinite(Y), axis=1).cumprod().astype(bool)
-    return Integration(Y[finite], status, message, counts["nfev"], counts["njev"], nlu,
-                       nsteps, nsw)
+    for stop in stops:
+        while j <= stop:
+            if solver.status == "finished":
+                nlu += getattr(solver, "nlu", 0)
+                t, y, bound = solver.t, solver.y, t_end
+                solver = cls(fun, t, y, bound, **opts)
+                continue
+            t_old, y_old = solver.t, solver.y.copy()
+            msg = solver.step()
+            if solver.status == "failed":
+                status, message = -1, f"{settings.method} failed at t = {t_old:.6g} s: {msg}"
+                break
+            y_new = solver.y
+            if not np.all(np.isfinite(y_new)):
+                status, message = -1, f"non-finite state at t = {solver.t:.6g} s"
+                break
+            nsteps += 1
+            if settings.events and not landed:
+                frac = first_switch(n, y_old, y_new, solver.t - t_old, settings.atol)
+                if EDGE < frac < 1.0 - EDGE:
+                    dt = solver.t - t_old
+                    t_sw = _refine_switch(solver.dense_output(), n, y_old, y_new, t_old,
+                                          solver.t, frac)
+                    if EDGE * dt < t_sw - t_old < (1.0 - EDGE) * dt:
+                        nsw += 1
+                        nlu += getattr(solver, "nlu", 0)
+                        solver = cls(fun, t_old, y_old, t_sw, **opts)
+                        landed = True
+                        continue
+            landed = False
+            sol = solver.dense_output()
+            while j < len(t_eval) and t_eval[j] <= solver.t:
+                out.append(sol(t_eval[j]))
+                j += 1
+            if gap_limit > 0 and max_gap(P, solver.y) > gap_limit:
+                status, message = -1, (f"loop-closure gap {max_gap(P, solver.y):.3g} m exceeded "
+                                       f"the limit {gap_limit:.3g} m at t = {solver.t:.6g} s")
+                break
+            if nsteps >= max_steps:
+                status, message = -1, f"step budget ({max_steps}) exhausted at t = {solver.t:.6g} s"
+                break
+        done = _leading_finite(out, done, len(out))
+        hi = max(lo, min(stop + 1, done) if status == 0 else done)
+        total = (counts["nfev"], counts["njev"], nlu + getattr(solver, "nlu", 0), nsteps, nsw)
+        block = np.array(out[lo:hi]).reshape(hi - lo, N)
+        yield Integration(block, status, message, *(a - b for a, b in zip(total, before)))
+        before, lo = total, hi
+        if status != 0:
+            return
 
 
 def _refine_switch(sol, n, y_old, y_new, t_old, t_new, frac):
@@ -425,13 +501,32 @@ def _refine_switch(sol, n, y_old, y_new, t_old, t_new, frac):
     return best
 
 
-def integrate(P, y0, t_eval, settings, max_steps, gap_limit, scheme="auto") -> Integration:
-    """Integrate the packed model from y0, sampling at t_eval (see module docstring).
+def integrate_blocks(P, y0, t_eval, settings, max_steps, gap_limit, scheme="auto",
+                     stops=None):
+    """Integrate the packed model from y0, sampling at t_eval (see module
+    docstring), as ONE run handed out in blocks of samples.
+
+    ``stops`` are increasing sample indices, the last ``len(t_eval) - 1``
+    (default: that one alone, one block). A generator: the integrator runs
+    only as far as the block asked for needs, and continues where it stopped
+    when the next one is asked for (closing the generator ends the run), so
+    the blocks joined are bit for bit what one block would be. It yields one
+    :class:`Integration` per stop: ``y`` the samples after the previous stop
+    up to this one (the first block from sample 0), counters the block's own,
+    ``max_steps`` the budget of the whole run. A failure ends it: the failing
+    block holds the samples reached (these may run past its stop) and
+    status -1.
 
     ``scheme`` picks the method behind ``settings.method == "compiled"``:
     "dopri5", "ros34pw2" or "auto" (:func:`choose_scheme`); other methods ignore it.
     ``Integration.scheme`` names the compiled scheme used ("" for scipy).
     """
+    stops = (len(t_eval) - 1,) if stops is None else stops
     if settings.method == "compiled":
-        return integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit, scheme)
-    return integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit)
+        return integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit, scheme, stops)
+    return integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit, stops)
+
+
+def integrate(P, y0, t_eval, settings, max_steps, gap_limit, scheme="auto") -> Integration:
+    """:func:`integrate_blocks` in one block: the whole run's :class:`Integration`."""
+    return next(integrate_blocks(P, y0, t_eval, settings, max_steps, gap_limit, scheme))

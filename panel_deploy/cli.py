@@ -64,7 +64,20 @@ def cmd_collide(args):
 
 def cmd_optimise(args):
     from .optimise import optimise_command
-    return optimise_command(args, _load(args))
+    if args.record and not args.out:
+        raise SceneError("--record", "needs --out RESULT.yaml: the recording deploys the K written there")
+    scene = _load(args)
+    code = optimise_command(args, scene)
+    if args.record and code != 130:
+        from .record.deployment import record_optimum
+        record_optimum(args.record, scene, args.out)
+        print(f"recorded the deployment of {args.out} -> {args.record}", file=sys.stderr)
+    return code
+
+
+def cmd_replay(args):
+    from .record.replay import replay_command
+    return replay_command(args)
 
 
 def cmd_export(args):
@@ -127,6 +140,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("scene", help="scene YAML file, or the name of a shipped scene")
     s.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     s.add_argument("--out", metavar="FILE.npz", help="save the sampled trajectory")
+    s.add_argument("--record", metavar="FILE.mcap",
+                   help="record the deployment as it is computed (ROS 2 MCAP: ros2 bag, Foxglove, rerun)")
     s.add_argument("--stiffness", metavar="RESULT.yaml", help="hinge stiffnesses from an optimisation result")
     s.add_argument("--method", help="override simulation.method")
     s.add_argument("--closure", choices=("penalty", "exact"), help="override closure.method")
@@ -145,14 +160,18 @@ def build_parser() -> argparse.ArgumentParser:
     _add_set(s)
     s.set_defaults(func=cmd_run)
 
-    s = sub.add_parser("collide", help="collision check of a saved trajectory")
-    s.add_argument("trajectory", help="trajectory .npz written by simulate --out")
+    s = sub.add_parser("collide", help="collision check of a saved trajectory or a recording")
+    s.add_argument("trajectory", help="trajectory .npz written by simulate --out, or an MCAP "
+                                      "recording (its /joint_states)")
+    s.add_argument("--scene", help="the recording's scene (file or shipped name); default: "
+                                   "its /panel_deploy/model")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_collide)
 
     s = sub.add_parser("optimise", help="hinge stiffnesses for a collision-free deployment (Eq. 8)")
     s.add_argument("scene")
     s.add_argument("--out", metavar="RESULT.yaml", help="result file (default: print it)")
+    s.add_argument("--record", metavar="FILE.mcap", help="record the deployment of the result (needs --out)")
     s.add_argument("--workers", type=int, help="parallel evaluations (default: all cores)")
     s.add_argument("--dask", metavar="ADDRESS", help="run evaluations on this Dask scheduler")
     s.add_argument("--method", choices=("local", "global"), help="override optimisation.method")
@@ -167,6 +186,21 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true", help="print the result as JSON")
     _add_set(s)
     s.set_defaults(func=cmd_optimise)
+
+    s = sub.add_parser("replay", help="replay a recording in rerun, or render it as a PNG strip")
+    s.add_argument("recording", help="MCAP recording (simulate --record, run --record, ros2 bag record)")
+    view = s.add_mutually_exclusive_group()
+    view.add_argument("--save", metavar="OUT.rrd", help="write a rerun recording file")
+    view.add_argument("--spawn", action="store_true", help="open the rerun viewer")
+    view.add_argument("--serve", action="store_true",
+                      help="serve to rerun viewers on 127.0.0.1 (rerun rerun+http://127.0.0.1:PORT/proxy)")
+    s.add_argument("--port", type=int, default=9876, help="port of --serve")
+    s.add_argument("--png", metavar="STRIP.png", help="render frames at --at into one image")
+    s.add_argument("--at", default="0,0.1,0.2,0.3,0.4", metavar="T,T,...",
+                   help="instants of the --png frames, s")
+    s.add_argument("--scene", help="the recording's scene (file or shipped name); default: "
+                                   "its /panel_deploy/model")
+    s.set_defaults(func=cmd_replay)
 
     s = sub.add_parser("export", help="export the model (MuJoCo MJCF)")
     s.add_argument("scene")

@@ -28,15 +28,13 @@ def apply_overrides(scene, args):
     return scene.replace(simulation=sim, closure=closure)
 
 
-def simulate_scene(scene, stiffness_file=None):
-    """Simulate a scene and check it for collisions: (model, result, report).
+def scene_model(scene, stiffness_file=None):
+    """The model a scene simulates.
 
     With ``stiffness_file`` (a result file) its k replaces the scene's, c
     following k, and :func:`damping_note` says so if the file's c differs.
     """
     from .build import build_model
-    from .collision import CollisionSettings, check_trajectory
-    from .dynamics import simulate
 
     model = build_model(scene)
     if stiffness_file:
@@ -44,6 +42,16 @@ def simulate_scene(scene, stiffness_file=None):
         k, c_file = load_hinges(stiffness_file, model)
         model = model.with_stiffness(k)
         damping_note(model, c_file, stiffness_file)
+    return model
+
+
+def simulate_scene(scene, stiffness_file=None):
+    """Simulate a scene (model as :func:`scene_model`) and check it for
+    collisions: (model, result, report)."""
+    from .collision import CollisionSettings, check_trajectory
+    from .dynamics import simulate
+
+    model = scene_model(scene, stiffness_file)
     result = simulate(model, scene.simulation)
     report = check_trajectory(model, result, CollisionSettings.from_scene(scene))
     return model, result, report
@@ -75,7 +83,12 @@ def simulate_command(args, scene) -> int:
     from .summary import deployment_summary, summary_text
 
     scene = apply_overrides(scene, args)
-    model, result, report = simulate_scene(scene, args.stiffness)
+    if getattr(args, "record", None):
+        from .record.deployment import record_deployment
+        model = scene_model(scene, args.stiffness)
+        result, report = record_deployment(args.record, scene, model)
+    else:
+        model, result, report = simulate_scene(scene, args.stiffness)
     if args.out:
         from .trajectory_io import save_trajectory
         save_trajectory(args.out, result, scene, model)

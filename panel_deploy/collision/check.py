@@ -268,15 +268,25 @@ class TrajectoryCheck:
 
 
 def collide_command(args) -> int:
-    """``panel-deploy collide TRAJECTORY [--json]``: check a saved trajectory.
+    """``panel-deploy collide TRAJECTORY [--scene SCENE] [--json]``: check a
+    saved trajectory (``.npz``) or the ``/joint_states`` of an MCAP recording.
 
-    The model is rebuilt from the scene stored in the file; only its
-    geometry and tree matter here, not the stored stiffnesses.
+    The model is rebuilt from the scene stored in the file (for a recording,
+    ``--scene`` when given); only its geometry and tree matter here, not the
+    stored stiffnesses.
     """
     from ..build import build_model
+    from ..errors import SceneError
+    from ..record.reader import is_mcap
     from ..trajectory_io import load_trajectory
 
-    result, scene, _ = load_trajectory(args.trajectory)
+    if is_mcap(args.trajectory):
+        from ..record.analysis import recording_trajectory
+        result, scene = recording_trajectory(args.trajectory, getattr(args, "scene", None))
+    elif getattr(args, "scene", None):
+        raise SceneError("--scene", "only for an MCAP recording; a .npz trajectory carries its scene")
+    else:
+        result, scene, _ = load_trajectory(args.trajectory)
     model = build_model(scene)
     report = check_trajectory(model, result, CollisionSettings.from_scene(scene))
     if getattr(args, "json", False):

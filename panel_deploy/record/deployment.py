@@ -1,0 +1,132 @@
+"""Recording a deployment as it is computed: ``simulate --record`` and ``optimise --record``.
+
+The samples of :class:`panel_deploy.live.Deployment` go to the file as
+they come, so a recording cut short keeps what was computed up to its last
+closed chunk. Each sample t_j (simulated s, also the MCAP log time) writes
+``/clock``, ``/joint_states``, ``/panel_deploy/panels`` and ``/tf``; the
+collision check runs on the same samples as ``panel-deploy simulate`` (the
+paper's D_j, stopping at the first collision) and writes each collision event
+to ``/panel_deploy/collision_events`` at the sample that revealed it. At t = 0:
+``/robot_description``, ``/panel_deploy/model`` and ``/tf_static``; at the
+end, the outcome on ``/diagnostics`` and as the ``outcome`` metadata record.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import yaml
+
+from ..collision import CollisionSettings
+from ..export.urdf import model_urdf
+from ..live import Deployment, StreamCheck
+from ..summary import deployment_summary
+from . import messages as m
+from .writer import Recorder, run_metadata
+
+#: Names of the metadata records a deployment recording carries.
+METADATA = ("scene", "model", "integrator", "run", "outcome")
+
+
+def recorded_scene_text(scene, model) -> str:
+    """The scene as YAML, with the model's k per hinge as ``hinges.overrides``
+    and, when every sprung hinge has the same c/k, that ratio as
+    ``hinges.damping_ratio``: building it gives back ``model``'s k and c."""
+    data = dict(scene.data)
+    hinges = dict(data.get("hinges") or {})
+    hinges["overrides"] = {h.name: float(h.k) for h in model.hinges}
+    ratios = {h.c / h.k for h in model.hinges if h.k > 0}
+    if ratios and max(ratios) - min(ratios) <= 1e-12 * max(ratios):
+        hinges["damping_ratio"] = float(np.median(sorted(ratios)))
+    data["hinges"] = hinges
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+def _model_record(model) -> dict:
+    c = model.closure
+    return {"hinges": [h.name for h in model.hinges],
+            "stiffness": [float(h.k) for h in model.hinges],           # N m/rad, one spring
+            "damping": [float(h.c) for h in model.hinges],             # N m s/rad, one spring
+            "springs": [int(h.springs) for h in model.hinges],
+            "k_s": float(model.k_s), "c_s": float(model.c_s),
+            "closure": c.method, "k_M": c.k_M, "c_M": c.c_M, "k_N": c.k_N, "c_N": c.c_N,
+            "gravity": [float(g) for g in model.gravity]}
+
+
+def _integrator_record(scene) -> dict:
+    s = scene.simulation
+    return {"method": s.method, "rtol": s.rtol, "atol": s.atol, "t_end": s.t_end,
+            "samples": s.samples, "rate_hz": (s.samples - 1) / s.t_end,
+            "flat_tolerance": s.flat_tolerance, "collision_tolerance": scene.collision.tolerance}
+
+
+def outcome_record(summary: dict, report) -> dict:
+    """The ``outcome`` metadata record: success, time to flat (s), first
+    collision (t s, pair, approach speed v m/s) and the smallest distance d (m)."""
+    first = report.first_collision
+    return {"success": bool(summary["success"]), "message": summary["message"],
+            "t_end": summary["t_end"], "time_to_flat": summary["time_to_flat"],
+            "collided": report.collided,
+            "first_collision_t": None if first is None else float(first.t),
+            "first_collision_pair": None if first is None else list(first.names),
+            "approach_speed": float(report.v) if first is not None else None,
+            "d": None if math.isinf(report.d) else float(report.d),
+            "wall_time": summary["wall_time"]}
+
+
+def record_deployment(path, scene, model, *, command: str | None = None):
+    """Simulate ``model`` as ``scene.simulation`` asks, check it for collisions
+    and record it all to ``path`` while it is computed.
+
+    Returns ``(result, report)`` equal to what
+    :func:`panel_deploy.run.simulate_scene` gives for the same model.
+    """
+    settings = CollisionSettings.from_scene(scene)
+    sim = scene.simulation
+    with Recorder(path) as rec:
+        rec.metadata("scene", {"name": scene.name or "", "source": str(scene.source or ""),
+                               "yaml": recorded_scene_text(scene, model)})
+        rec.metadata("model", _model_record(model))
+        rec.metadata("integrator", _integrator_record(scene))
+        rec.metadata("run", run_metadata(command))
+        rec.write("/robot_description", m.STRING, m.string(model_urdf(model)), 0)
+        rec.write("/panel_deploy/model", m.STRING, m.string(recorded_scene_text(scene, model)), 0)
+        rec.write("/tf_static", m.TF_MESSAGE, m.tf_static(model), 0)
+        deployment = Deployment(model, sim)
+        check = StreamCheck(model, settings)
+        n = model.n_coords
+        for s in deployment:
+            ns = m.nanoseconds(s.t)
+            rec.write("/clock", m.CLOCK, m.clock(s.t), ns)
+            rec.write("/joint_states", m.JOINT_STATE,
+                      m.joint_state(deployment.names, s.t, s.theta, s.omega, s.torque), ns)
+            rec.write("/panel_deploy/panels", m.MARKER_ARRAY,
+                      m.panel_markers(model, s.rotation, s.position, s.t), ns)
+            rec.write("/tf", m.TF_MESSAGE, m.tf_message(model, s.rotation, s.position, s.t), ns)
+            if check.check is None or not check.check.collided:
+                events = check.update(s.t, s.theta[:n], s.omega[:n])
+                if events:
+                    rec.write("/panel_deploy/collision_events", m.DIAGNOSTIC_ARRAY,
+                              m.diagnostics(s.t, *(m.event_status(e) for e in events)), ns)
+        result = deployment.result
+        report = check.check.report()
+        summary = deployment_summary(model, result, report, flat_tol=sim.flat_tolerance)
+        level, text, values = check.verdict()
+        t_end = float(result.t[-1])
+        rec.write("/diagnostics", m.DIAGNOSTIC_ARRAY, m.diagnostics(
+            t_end, m.outcome_status(summary),
+            m.status("panel_deploy/collision_monitor", level, text, values)), m.nanoseconds(t_end))
+        rec.metadata("outcome", outcome_record(summary, report))
+    return result, report
+
+
+def record_optimum(path, scene, result_file, *, command: str | None = None):
+    """``optimise --record``: record the deployment of the K and c written to
+    ``result_file`` (the result of ``optimise --out``) with the scene's simulation settings."""
+    from ..build import build_model
+    from ..optimise import load_hinges
+
+    model = build_model(scene)
+    k, c = load_hinges(result_file, model)
+    return record_deployment(path, scene, model.with_stiffness(k, c), command=command)

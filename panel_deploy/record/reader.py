@@ -1,0 +1,339 @@
+"""Reading a ROS 2 MCAP recording back: ours, or any ``ros2 bag record`` of ``/joint_states``.
+
+:func:`open_recording` reads the file's records in order (chunk CRCs
+checked) without needing its summary, so a recording cut short (a process
+killed mid-run) is read up to its last complete record and flagged
+:attr:`Recording.truncated`. :func:`joint_states` gives the ``/joint_states``
+stream as arrays and :func:`hinge_track` maps it onto a model's hinges.
+Every problem is a :class:`~panel_deploy.errors.TrajectoryError` whose
+one-line message starts with the file name.
+"""
+
+from __future__ import annotations
+
+import mmap
+import struct
+from dataclasses import dataclass, field
+from io import BytesIO
+from pathlib import Path
+
+import numpy as np
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, Header, Message, Metadata, Schema
+from mcap.stream_reader import breakup_chunk
+
+from ..errors import PanelDeployError, TrajectoryError
+from . import messages
+
+MAGIC = b"\x89MCAP0\r\n"
+
+
+def is_mcap(path) -> bool:
+    """True when ``path`` names an MCAP file (by suffix or by its leading magic bytes)."""
+    path = Path(path)
+    if path.suffix == ".mcap":
+        return True
+    try:
+        with open(path, "rb") as f:
+            return f.read(len(MAGIC)) == MAGIC
+    except OSError:
+        return False
+
+
+@dataclass
+class Recording:
+    """What an MCAP file holds, read in file order.
+
+    Attributes
+    ----------
+    path : Path
+    profile, library : str
+        From the MCAP header (``ros2`` for a ROS 2 recording).
+    topics : dict
+        topic -> message type name (the channel's schema name).
+    encodings : dict
+        topic -> message encoding (``cdr`` for ROS 2).
+    metadata : dict
+        Metadata record name -> {key: value} (str).
+    truncated : str or None
+        Why the file ends early (then it was read up to its last complete
+        record); None for a complete file.
+    """
+
+    path: Path
+    profile: str = ""
+    library: str = ""
+    topics: dict = field(default_factory=dict)
+    encodings: dict = field(default_factory=dict)
+    metadata: dict = field(default_factory=dict)
+    truncated: str | None = None
+    _raw: dict = field(default_factory=dict, repr=False)   # topic -> [(log_time ns, bytes)]
+
+    def count(self, topic: str) -> int:
+        """Messages read on ``topic``."""
+        return len(self._raw.get(topic, ()))
+
+    @property
+    def end_time(self) -> float | None:
+        """The latest log time read, s (None without messages)."""
+        times = [raw[-1][0] for raw in self._raw.values() if raw]
+        return max(times) * 1e-9 if times else None
+
+    def messages(self, topic: str, typename: str | None = None) -> list:
+        """``[(log_time ns, message)]`` of ``topic``, decoded with the rosbags Jazzy type store.
+
+        Raises
+        ------
+        TrajectoryError
+            ``topic`` is absent, of another type than ``typename``, not CDR,
+            or a message does not decode.
+        """
+        if topic not in self.topics:
+            raise TrajectoryError(f"{self.path}: no {topic} in this recording (topics: "
+                                  f"{', '.join(sorted(self.topics)) or 'none'})")
+        actual = self.topics[topic]
+        if typename is not None and actual != typename:
+            raise TrajectoryError(f"{self.path}: {topic} is {actual or 'of no type'}, "
+                                  f"expected {typename}")
+        if self.encodings[topic] != "cdr":
+            raise TrajectoryError(f"{self.path}: {topic} is encoded as "
+                                  f"{self.encodings[topic]!r}, expected ROS 2 'cdr'")
+        out = []
+        for i, (log_time, data) in enumerate(self._raw.get(topic, ())):
+            try:
+                out.append((log_time, messages.deserialize(data, actual)))
+            except Exception as e:  # rosbags raises several kinds on bad bytes
+                raise TrajectoryError(f"{self.path}: {topic} message {i} does not decode as "
+                                      f"{actual} ({e})") from None
+        return out
+
+    def scene(self):
+        """The scene of ``/panel_deploy/model`` (its last message), or None without one.
+
+        Raises
+        ------
+        TrajectoryError
+            The scene text is not a valid scene.
+        """
+        if not self.count("/panel_deploy/model"):
+            return None
+        from ..live import scene_from_yaml
+
+        text = self.messages("/panel_deploy/model", messages.STRING)[-1][1].data
+        try:
+            return scene_from_yaml(text, source=f"{self.path}:/panel_deploy/model")
+        except PanelDeployError as e:
+            raise TrajectoryError(f"{self.path}: /panel_deploy/model is not a valid scene ({e})") from None
+
+
+def open_recording(path) -> Recording:
+    """Read an MCAP file's records (messages kept as bytes, decoded on demand).
+
+    Raises
+    ------
+    TrajectoryError
+        Missing, empty, not MCAP, corrupt (a record that does not parse, a
+        chunk whose CRC or compression fails), or nothing recorded.
+    """
+    path = Path(path)
+    try:
+        f = open(path, "rb")
+    except OSError as e:
+        raise TrajectoryError(f"{path}: cannot read the recording ({e.strerror})") from None
+    with f:
+        size = Path(path).stat().st_size
+        if size == 0:
+            raise TrajectoryError(f"{path}: empty file, not an MCAP recording")
+        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            if data[:len(MAGIC)] != MAGIC:
+                raise TrajectoryError(f"{path}: not an MCAP file (it does not start with the "
+                                      f"MCAP magic bytes)")
+            recording = Recording(path)
+            _read_records(recording, data, size)
+    if not recording._raw:
+        why = f" ({recording.truncated})" if recording.truncated else ""
+        raise TrajectoryError(f"{path}: no messages in this recording{why}")
+    return recording
+
+
+def _read_records(recording: Recording, data, size: int) -> None:
+    schemas, channels = {}, {}
+    pos = len(MAGIC)
+    while True:
+        if pos + 9 > size:
+            recording.truncated = f"ends at byte {size} without the MCAP footer"
+            return
+        opcode, length = struct.unpack_from("<BQ", data, pos)
+        end = pos + 9 + length
+        if end > size:
+            recording.truncated = (f"cut at byte {size} inside a record of {length} bytes "
+                                   f"that starts at byte {pos}")
+            return
+        try:
+            records = _parse(opcode, data[pos + 9:end], length)
+        except Exception as e:  # struct, CRC, decompression, UTF-8: all mean corrupt
+            name = Opcode(opcode).name if opcode in Opcode._value2member_map_ else f"opcode {opcode}"
+            raise TrajectoryError(f"{recording.path}: corrupt {name.lower()} record at byte {pos} "
+                                  f"({e})") from None
+        for r in records:
+            if isinstance(r, Header):
+                recording.profile, recording.library = r.profile, r.library
+            elif isinstance(r, Schema):
+                schemas[r.id] = r
+            elif isinstance(r, Channel):
+                channels[r.id] = r
+                schema = schemas.get(r.schema_id)
+                recording.topics[r.topic] = schema.name if schema else ""
+                recording.encodings[r.topic] = r.message_encoding
+                recording._raw.setdefault(r.topic, [])
+            elif isinstance(r, Message):
+                channel = channels.get(r.channel_id)
+                if channel is None:
+                    raise TrajectoryError(f"{recording.path}: corrupt: a message at byte {pos} "
+                                          f"names channel {r.channel_id}, never defined")
+                recording._raw[channel.topic].append((r.log_time, r.data))
+            elif isinstance(r, Metadata):
+                recording.metadata[r.name] = dict(r.metadata)
+        if opcode == Opcode.FOOTER:
+            return
+        pos = end
+
+
+def _parse(opcode: int, body, length: int) -> list:
+    stream = ReadDataStream(BytesIO(body))
+    if opcode == Opcode.CHUNK:
+        return breakup_chunk(Chunk.read(stream), validate_crc=True)
+    if opcode == Opcode.MESSAGE:
+        return [Message.read(stream, length)]
+    for record in (Header, Schema, Channel, Metadata):
+        if opcode == getattr(Opcode, record.__name__.upper()):
+            return [record.read(stream)]
+    return []  # indexes, statistics, summary records, attachments: not needed here
+
+
+@dataclass
+class JointStates:
+    """The ``/joint_states`` stream as arrays, joints in the first message's order.
+
+    Attributes
+    ----------
+    t : (s,) ndarray
+        ``header.stamp`` of every message, s.
+    names : list of str
+    position : (s, n) ndarray
+        rad.
+    velocity, effort : (s, n) ndarray or None
+        rad/s and N m; None when the messages carry none.
+    """
+
+    t: np.ndarray
+    names: list
+    position: np.ndarray
+    velocity: np.ndarray | None
+    effort: np.ndarray | None
+
+
+def joint_states(recording: Recording) -> JointStates:
+    """The ``/joint_states`` of a recording, checked message by message.
+
+    Raises
+    ------
+    TrajectoryError
+        No such topic or messages; a message whose names differ from the
+        first one's, whose arrays do not match its names, with values that
+        are not finite, or whose stamp is not after the previous one's.
+    """
+    path = recording.path
+    msgs = [msg for _, msg in recording.messages("/joint_states", messages.JOINT_STATE)]
+    if not msgs:
+        raise TrajectoryError(f"{path}: /joint_states has no messages")
+    names = list(msgs[0].name)
+    n, s = len(names), len(msgs)
+    if n == 0 or len(set(names)) != n:
+        raise TrajectoryError(f"{path}: /joint_states message 0 names "
+                              f"{'no joint' if n == 0 else 'a joint twice'}")
+    t = np.empty(s)
+    arrays = {"position": np.empty((s, n)), "velocity": np.empty((s, n)), "effort": np.empty((s, n))}
+    present = {key: len(getattr(msgs[0], key)) == n for key in arrays}
+    if not present["position"]:
+        raise TrajectoryError(f"{path}: /joint_states message 0 has {len(msgs[0].position)} "
+                              f"positions for {n} names")
+    for j, msg in enumerate(msgs):
+        where = f"{path}: /joint_states message {j}"
+        order = list(range(n)) if list(msg.name) == names else _order(msg.name, names, where)
+        for key, out in arrays.items():
+            values = getattr(msg, key)
+            if present[key]:
+                if len(values) != n:
+                    raise TrajectoryError(f"{where}: {len(values)} {key} values for {n} names")
+                out[j] = np.asarray(values, dtype=float)[order]
+        t[j] = messages.seconds(msg.header.stamp)
+        if j and not t[j] > t[j - 1]:
+            raise TrajectoryError(f"{where}: stamp {t[j]:.9g} s is not after the previous "
+                                  f"one ({t[j - 1]:.9g} s)")
+    for key, out in arrays.items():
+        if present[key] and not np.all(np.isfinite(out)):
+            j = int(np.flatnonzero(~np.all(np.isfinite(out), axis=1))[0])
+            raise TrajectoryError(f"{path}: /joint_states message {j}: {key} is not finite")
+    return JointStates(t, names, arrays["position"],
+                       arrays["velocity"] if present["velocity"] else None,
+                       arrays["effort"] if present["effort"] else None)
+
+
+def _order(given, names, where):
+    given = list(given)
+    if sorted(given) != sorted(names):
+        extra = sorted(set(given) - set(names)) or sorted(set(names) - set(given))
+        raise TrajectoryError(f"{where}: joints {given} are not those of message 0 "
+                              f"(differs in {extra[0]!r})")
+    return [given.index(name) for name in names]
+
+
+@dataclass
+class HingeTrack:
+    """A joint-state stream on a model's tree coordinates, what the collision check takes.
+
+    Attributes
+    ----------
+    t : (s,) ndarray
+        s from the first joint state (``t0`` is its stamp).
+    theta : (s, n_coords) ndarray
+        rad, in ``model.joints`` order.
+    omega : (s, n_coords) ndarray or list of None
+        rad/s; ``[None] * s`` when the stream has no velocities (the check
+        then takes finite differences).
+    t0 : float
+        s.
+    """
+
+    t: np.ndarray
+    theta: np.ndarray
+    omega: object
+    t0: float
+
+
+def hinge_track(states: JointStates, model, path, scene_name: str = "") -> HingeTrack:
+    """``states`` on ``model``'s tree hinges (cut hinges may be present and are not needed).
+
+    Raises
+    ------
+    TrajectoryError
+        A joint that is no hinge of the model, or a tree hinge missing.
+    """
+    from ..dynamics.report import hinge_order
+
+    known = [model.hinges[h].name for h in hinge_order(model)]
+    tree = known[:model.n_coords]
+    label = f"scene {scene_name}" if scene_name else "the scene"
+    unknown = [name for name in states.names if name not in known]
+    missing = [name for name in tree if name not in states.names]
+    if unknown or missing:
+        what = (f"joint {unknown[0]!r} is not a hinge of {label}" if unknown else
+                f"hinge {missing[0]!r} of {label} is missing")
+        raise TrajectoryError(f"{path}: /joint_states names are not the hinges of {label}: "
+                              f"{what} (hinges: {', '.join(known)})")
+    index = [states.names.index(name) for name in tree]
+    omega = (states.velocity[:, index] if states.velocity is not None
+             else [None] * len(states.t))
+    return HingeTrack(states.t - states.t[0], states.position[:, index], omega, float(states.t[0]))

@@ -1,0 +1,188 @@
+"""``panel-deploy replay``: a recording logged to rerun, or rendered as a PNG strip.
+
+What is logged (timeline ``sim_time``: the joint states' stamps, s; one
+frame per joint state):
+
+- ``world/panels/<body>``: every panel a box of its true size (thickness
+  included, static ``half_sizes``), posed each frame by a ``Transform3D``
+  (centroid and rotation from the model's forward kinematics of the
+  recorded angles); the panels of the first collision turn red at the
+  sample that reveals it (the motion after it is not physical).
+- ``world/collisions``: the contact point of each first-collision event.
+- ``hinges/<name>``: every joint of ``/joint_states`` (rad).
+- ``energy/<kind>``: kinetic, spring (hinge springs, joint-limit contact
+  and closure penalty springs) and gravity energy and their sum (J), from the
+  model at the recorded angles and rates (kinetic and the sum need rates).
+- ``distance/d``: the smallest distance between panels that share no hinge (m).
+- ``events``: one text line per first-collision event, at its sample.
+
+The blueprint opens on the 3D view beside the plots and the event log.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+from ..errors import SceneError
+from .analysis import RecordedDeployment, read_deployment
+
+TIMELINE = "sim_time"
+PANEL_RGBA = (64, 115, 217, 255)
+GROUND_RGBA = (217, 140, 51, 255)
+HIT_RGBA = (242, 38, 26, 255)
+
+
+def body_poses(d: RecordedDeployment):
+    """``(R, p)``: every body's rotation (s, nb, 3, 3) and centroid (s, nb, 3, m) at every sample."""
+    from ..kinematics import forward_kinematics
+
+    poses = [forward_kinematics(d.model, theta) for theta in d.track.theta]
+    return np.array([R for R, _ in poses]), np.array([p for _, p in poses])
+
+
+def energies(d: RecordedDeployment) -> dict:
+    """Kinetic, spring and gravity energy and their sum (J) at every sample;
+    only spring and gravity when the recording has no rates."""
+    from ..dynamics.kernels import observe
+    from ..dynamics.pack import pack
+
+    P, n = pack(d.model), d.model.n_coords
+    has_rates = not isinstance(d.track.omega, list)
+    out = {"spring": [], "gravity": []} | ({"kinetic": [], "total": []} if has_rates else {})
+    for j, theta in enumerate(d.track.theta):
+        y = np.zeros(2 * n + 2)
+        y[:n] = theta
+        if has_rates:
+            y[n:2 * n] = d.track.omega[j]
+        kinetic, spring, gravity, _, _ = observe(P, y)
+        out["spring"].append(spring)
+        out["gravity"].append(gravity)
+        if has_rates:
+            out["kinetic"].append(kinetic)
+            out["total"].append(kinetic + spring + gravity)
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def collision_events(d: RecordedDeployment):
+    """``(distance, events)``: the smallest distance (m) at every sample, and
+    the first collision's events (every pair colliding at the sample that
+    reveals it, as ``collide`` reports; the motion after it is not physical)."""
+    from ..collision import CollisionSettings
+    from ..collision.check import TrajectoryCheck
+
+    check = TrajectoryCheck(d.model, CollisionSettings.from_scene(d.scene), capacity=len(d.track.t))
+    distance = np.empty(len(d.track.t))
+    for j, t in enumerate(d.track.t):
+        check.update(t, d.track.theta[j], d.track.omega[j])
+        distance[j] = check.monitor.min_distance
+    return distance, check.first_events
+
+
+def _path(*parts) -> str:
+    import rerun as rr
+    return "/".join(rr.escape_entity_path_part(p) for p in parts)
+
+
+def log_deployment(stream, d: RecordedDeployment) -> int:
+    """Log ``d`` to the rerun ``stream``; returns the frames logged (one per joint state)."""
+    import rerun as rr
+
+    t = d.track.t
+    time = [rr.TimeColumn(TIMELINE, duration=t)]
+    model = d.model
+    R, p = body_poses(d)
+    distance, events = collision_events(d)
+    hit = {b: int(e.sample) for e in events for b in e.bodies}
+    stream.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    for b, body in enumerate(model.bodies):
+        path = _path("world", "panels", body.name)
+        stream.log(path, rr.Boxes3D(half_sizes=[np.asarray(body.size) / 2], labels=[body.name]),
+                   static=True)
+        stream.send_columns(path, time, rr.Transform3D.columns(translation=p[:, b],
+                                                               mat3x3=R[:, b]))
+        colour = GROUND_RGBA if b == model.ground else PANEL_RGBA
+        stream.set_time(TIMELINE, duration=float(t[0]))
+        stream.log(path, rr.Boxes3D.from_fields(colors=[colour]))
+        if b in hit:
+            stream.set_time(TIMELINE, duration=float(t[hit[b]]))
+            stream.log(path, rr.Boxes3D.from_fields(colors=[HIT_RGBA]))
+    positions = d.states.position
+    for k, name in enumerate(d.states.names):
+        stream.log(_path("hinges", name), rr.SeriesLines(names=[name]), static=True)
+        stream.send_columns(_path("hinges", name), time, rr.Scalars.columns(scalars=positions[:, k]))
+    for kind, values in energies(d).items():
+        stream.send_columns(_path("energy", kind), time, rr.Scalars.columns(scalars=values))
+    finite = np.isfinite(distance)
+    stream.send_columns(_path("distance", "d"), [rr.TimeColumn(TIMELINE, duration=t[finite])],
+                        rr.Scalars.columns(scalars=distance[finite]))
+    for e in events:
+        stream.set_time(TIMELINE, duration=float(t[e.sample]))
+        speed = e.approach_speed if np.isfinite(e.approach_speed) else e.normal_speed
+        stream.log("events", rr.TextLog(f"collision between {e.names[0]} and {e.names[1]} at "
+                                        f"t = {e.t:.4f} s, approach speed {speed:.4f} m/s",
+                                        level=rr.TextLogLevel.ERROR))
+        stream.log(_path("world", "collisions"), rr.Points3D([e.point], colors=[HIT_RGBA],
+                                                             radii=[0.004]))
+    return len(t)
+
+
+def blueprint():
+    """The 3D view of the array beside hinge angles, energies, distance and events."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(rrb.Horizontal(
+        rrb.Spatial3DView(origin="world", name="panels"),
+        rrb.Vertical(rrb.TimeSeriesView(origin="hinges", name="hinge angles (rad)"),
+                     rrb.TimeSeriesView(origin="energy", name="energy (J)"),
+                     rrb.TimeSeriesView(origin="distance", name="smallest distance d (m)"),
+                     rrb.TextLogView(origin="events", name="collision events")),
+        column_shares=[3, 2]), collapse_panels=True)
+
+
+def _times(text: str) -> list:
+    try:
+        times = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise SceneError("--at", f"expected instants in s separated by commas, got {text!r}") from None
+    if not times:
+        raise SceneError("--at", "expected at least one instant")
+    return times
+
+
+def replay_command(args) -> int:
+    """``panel-deploy replay FILE [--save OUT.rrd | --spawn | --serve] [--png STRIP.png --at T,...]``.
+
+    Without ``--save``, ``--serve`` or ``--png`` it opens the viewer (``--spawn``).
+    ``--serve`` binds 127.0.0.1 only and runs until Ctrl-C.
+    """
+    at = _times(args.at) if args.png else None
+    d = read_deployment(args.recording, args.scene)
+    if args.png:
+        from .strip import render_strip
+        render_strip(d, at, args.png)
+        print(f"{len(at)} frames -> {args.png}")
+    if args.png and not (args.save or args.spawn or args.serve):
+        return 0
+    import rerun as rr
+
+    stream = rr.RecordingStream("panel_deploy")
+    if args.save:
+        stream.save(args.save, default_blueprint=blueprint())
+    elif args.serve:
+        sink = rr.GrpcServerSink(bind_ip="127.0.0.1", port=args.port)
+        stream.set_sinks(sink, default_blueprint=blueprint())
+    else:
+        stream.spawn(default_blueprint=blueprint())
+    frames = log_deployment(stream, d)
+    stream.flush()
+    target = args.save or ("rerun " + sink.uri if args.serve else "the rerun viewer")
+    print(f"{frames} frames of {d.recording.path} -> {target}")
+    if args.serve:
+        try:
+            import threading
+            threading.Event().wait()
+        except KeyboardInterrupt:
+            print("panel-deploy: stopped serving", file=sys.stderr)
+    return 0

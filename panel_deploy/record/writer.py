@@ -1,0 +1,203 @@
+"""Writing a ROS 2 recording to one MCAP file, laid out as rosbag2's MCAP storage does.
+
+The file follows the MCAP ROS 2 profile: header profile ``ros2``; one schema
+per message type (encoding ``ros2msg``, the Jazzy definition text); one
+channel per topic (message encoding ``cdr``, channel metadata
+``offered_qos_profiles`` and ``topic_type_hash`` as rosbag2 writes them);
+messages in zstd-compressed chunks with message indexes; at the end chunk
+indexes, statistics, summary offsets and the ``rosbag2`` metadata record
+(``serialized_metadata``, rosbag2 metadata version 9), so that
+``ros2 bag info FILE.mcap`` and ``ros2 bag play FILE.mcap`` (Jazzy: a single
+storage file opens without a ``metadata.yaml``; rosbag2 takes counts and
+durations from the MCAP statistics), Foxglove and rerun open it as it is.
+
+Chunks close after :attr:`Recorder.chunk_span` seconds of log time (and at
+:attr:`Recorder.chunk_bytes`) and are flushed to the operating system at
+once: a process killed at any moment leaves every closed chunk readable, so
+at most ``chunk_span`` of log time (plus the sample in flight) is lost.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import sys
+from importlib.metadata import version
+from pathlib import Path
+
+import yaml
+from mcap.writer import CompressionType, Writer
+
+from .. import __version__
+from ..errors import TrajectoryError
+from . import messages
+
+#: rmw's "infinite" duration (``RMW_DURATION_INFINITE``) as rosbag2 stores it.
+_INFINITE = {"sec": 9223372036, "nsec": 854775807}
+
+
+def qos_profiles(durability: str, depth: int) -> list:
+    """The ``offered_qos_profiles`` of one publisher (rosbag2 metadata version 9):
+    reliable, keep last ``depth``, ``durability`` "volatile" or "transient_local"."""
+    return [{"history": "keep_last", "depth": depth, "reliability": "reliable",
+             "durability": durability, "deadline": dict(_INFINITE), "lifespan": dict(_INFINITE),
+             "liveliness": "automatic", "liveliness_lease_duration": dict(_INFINITE),
+             "avoid_ros_namespace_conventions": False}]
+
+
+def _qos_for(topic: str) -> list:
+    durability, depth = messages.TOPICS.get(topic, (None, messages.EVENTS))[1]
+    return qos_profiles(durability, depth)
+
+
+class Recorder:
+    """Writes messages to an MCAP file; use as a context manager or call :meth:`close`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.mcap`` file; an existing file is overwritten.
+    chunk_span : float
+        s of log time after which the open chunk is closed and flushed.
+    chunk_bytes : int
+        Serialized message bytes after which the open chunk is closed anyway.
+
+    Raises
+    ------
+    TrajectoryError
+        The file cannot be created.
+    """
+
+    def __init__(self, path, *, chunk_span: float = 0.25, chunk_bytes: int = 4 << 20):
+        self.path = Path(path)
+        self.chunk_span = chunk_span
+        self.chunk_bytes = chunk_bytes
+        try:
+            self._stream = open(self.path, "wb")
+        except OSError as e:
+            raise TrajectoryError(f"{self.path}: cannot write the recording ({e.strerror})") from None
+        # chunk_size is a ceiling never reached: this class closes the chunks.
+        self._writer = Writer(self._stream, chunk_size=1 << 40, compression=CompressionType.ZSTD)
+        self._writer.start(profile="ros2", library=f"panel_deploy {__version__}")
+        self._schemas: dict = {}    # type name -> schema id
+        self._channels: dict = {}   # topic -> (channel id, type name)
+        self._counts: dict = {}     # topic -> messages
+        self._chunk_start = None    # log time (ns) of the open chunk's first message
+        self._chunk_size = 0
+        self.first_time = self.last_time = None
+        self.closed = False
+
+    def channel(self, topic: str, typename: str) -> int:
+        """The channel id of ``topic`` (registered on first use with ``typename``).
+
+        Raises
+        ------
+        TrajectoryError
+            ``topic`` was registered with another type.
+        """
+        if topic in self._channels:
+            cid, known = self._channels[topic]
+            if known != typename:
+                raise TrajectoryError(f"{self.path}: {topic} is {known}, cannot also record {typename}")
+            return cid
+        if typename not in self._schemas:
+            self._schemas[typename] = self._writer.register_schema(
+                typename, "ros2msg", messages.msgdef(typename).encode())
+        cid = self._writer.register_channel(
+            topic, "cdr", self._schemas[typename],
+            {"offered_qos_profiles": yaml.safe_dump(_qos_for(topic), sort_keys=False),
+             "topic_type_hash": messages.type_hash(typename)})
+        self._channels[topic] = (cid, typename)
+        self._counts[topic] = 0
+        return cid
+
+    def write(self, topic: str, typename: str, message, log_time: int) -> None:
+        """Record one message.
+
+        Parameters
+        ----------
+        topic, typename : str
+            e.g. ``"/joint_states"``, ``"sensor_msgs/msg/JointState"``.
+        message : rosbags message or bytes
+            A message of the rosbags Jazzy type store, or its CDR bytes as
+            received (e.g. from an rclpy subscription with ``raw=True``).
+        log_time : int
+            ns; simulated time for a deployment.
+        """
+        cid = self.channel(topic, typename)
+        data = message if isinstance(message, (bytes, bytearray, memoryview)) else \
+            messages.serialize(message)
+        if self._chunk_start is not None and (log_time - self._chunk_start
+                                              >= self.chunk_span * 1e9
+                                              or self._chunk_size >= self.chunk_bytes):
+            self.flush()
+        if self._chunk_start is None:
+            self._chunk_start = log_time
+        self._writer.add_message(cid, log_time=log_time, data=bytes(data), publish_time=log_time)
+        self._chunk_size += len(data)
+        self._counts[topic] += 1
+        self.first_time = log_time if self.first_time is None else min(self.first_time, log_time)
+        self.last_time = log_time if self.last_time is None else max(self.last_time, log_time)
+
+    def flush(self) -> None:
+        """Close the open chunk and hand everything written to the operating system."""
+        self._writer.flush()
+        self._chunk_start, self._chunk_size = None, 0
+
+    def metadata(self, name: str, values: dict) -> None:
+        """An MCAP metadata record: ``values`` become strings (JSON, which is
+        also YAML, for anything but a string). Written at once, between chunks."""
+        text = {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in values.items()}
+        self._writer.add_metadata(name, text)
+        self._stream.flush()
+
+    def bag_metadata(self) -> dict:
+        """rosbag2's ``BagMetadata`` (version 9) of what has been written."""
+        start = self.first_time or 0
+        duration = 0 if self.first_time is None else self.last_time - self.first_time
+        total = sum(self._counts.values())
+        return {
+            "version": 9, "storage_identifier": "mcap",
+            "duration": {"nanoseconds": duration},
+            "starting_time": {"nanoseconds_since_epoch": start},
+            "message_count": total,
+            "topics_with_message_count": [
+                {"topic_metadata": {"name": topic, "type": typename, "serialization_format": "cdr",
+                                    "offered_qos_profiles": _qos_for(topic),
+                                    "type_description_hash": messages.type_hash(typename)},
+                 "message_count": self._counts[topic]}
+                for topic, (_, typename) in self._channels.items()],
+            "compression_format": "", "compression_mode": "",
+            "relative_file_paths": [self.path.name],
+            "files": [{"path": self.path.name,
+                       "starting_time": {"nanoseconds_since_epoch": start},
+                       "duration": {"nanoseconds": duration}, "message_count": total}],
+            "custom_data": {}, "ros_distro": "jazzy",
+        }
+
+    def close(self) -> None:
+        """Write the summary (indexes, statistics) and the rosbag2 metadata record; close the file."""
+        if self.closed:
+            return
+        self.flush()
+        self._writer.add_metadata("rosbag2", {"serialized_metadata": yaml.safe_dump(
+            self.bag_metadata(), sort_keys=False)})
+        self._writer.finish()
+        self._stream.close()
+        self.closed = True
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def run_metadata(command: str | None = None) -> dict:
+    """The ``run`` metadata record: package and library versions, wall-clock
+    start (UTC, ISO 8601), Python and the command line."""
+    return {"package": "panel_deploy", "version": __version__,
+            "wall_time": datetime.datetime.now(datetime.timezone.utc).isoformat(),
+            "python": sys.version.split()[0], "mcap": version("mcap"),
+            "rosbags": version("rosbags"),
+            "command": command if command is not None else " ".join(sys.argv)}

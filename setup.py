@@ -29,10 +29,14 @@ setup(
         "python-fcl>=0.7",
         "numba>=0.59",
         "matplotlib>=3.7",
+        "mcap>=1.6",
+        "rosbags>=0.11",
+        "rerun-sdk~=0.41.0",
     ],
     extras_require={
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
-        "test": ["pytest>=7", "mujoco>=3.0", "dask[distributed]>=2024.1", "yourdfpy>=0.0.56"],
+        "test": ["pytest>=7", "mujoco>=3.0", "dask[distributed]>=2024.1", "yourdfpy>=0.0.56",
+                 "mcap-ros2-support>=0.5"],
     },
     zip_safe=True,
     entry_points={

@@ -45,15 +45,14 @@ class Client:
         self.executor = MultiThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.received = {}
+        self._clients = {}
+        self._closing = threading.Event()
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
 
     def _spin(self):
-        while self.context.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.05)
-            except Exception:  # shutdown race at the end of a test module
-                return
+        while not self._closing.is_set():
+            self.executor.spin_once(timeout_sec=0.05)
 
     def listen(self, msg_type, topic, qos=messages.EVENTS):
         """The list every message on ``topic`` is appended to (one subscription per topic)."""
@@ -63,34 +62,41 @@ class Client:
         return self.received[topic]
 
     def call(self, srv_type, service, request=None, timeout=20.0):
-        client = self.node.create_client(srv_type, service)
-        try:
-            assert client.wait_for_service(timeout_sec=timeout), f"{service} not available"
-            future = client.call_async(request if request is not None else srv_type.Request())
-            done = threading.Event()
-            future.add_done_callback(lambda _: done.set())
-            assert done.wait(timeout), f"{service} did not answer"
-            return future.result()
-        finally:
-            self.node.destroy_client(client)
+        # Clients are kept: destroying one under a spinning executor can block.
+        key = (srv_type, service)
+        if key not in self._clients:
+            self._clients[key] = self.node.create_client(srv_type, service)
+        client = self._clients[key]
+        assert client.wait_for_service(timeout_sec=timeout), f"{service} not available"
+        future = client.call_async(request if request is not None else srv_type.Request())
+        done = threading.Event()
+        future.add_done_callback(lambda _: done.set())
+        assert done.wait(timeout), f"{service} did not answer"
+        return future.result()
+
+    def has_node(self, name):
+        return name in self.node.get_node_names()
 
     def trigger(self, service):
         return self.call(Trigger, service)
 
     def close(self):
+        self._closing.set()
+        self._thread.join(timeout=5.0)
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
-        self._thread.join(timeout=2.0)
 
 
 class NodeProcess:
     """A node executable run as its own process with ``--ros-args``."""
 
-    def __init__(self, name, *params):
+    def __init__(self, name, *params, node_name=None):
         args = [executable(name), "--ros-args"]
         for p in params:
             args += ["-p", p]
+        if node_name:  # a name of its own, to tell this process from others of its kind
+            args += ["-r", f"__node:={node_name}"]
         self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      text=True, env=os.environ.copy())
 

@@ -85,11 +85,10 @@ def test_bad_scene_is_refused_and_the_old_model_stays(node, tmp_path):
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signals_end_the_node_cleanly(sig):
-    proc = NodeProcess("array_model")
+    proc = NodeProcess("array_model", node_name=f"array_model_{sig.name}")
     client = Client("array_model_signal")
     try:
-        wait_for(lambda: client.node.count_publishers("/robot_description") >= 1, timeout=60,
-                 what="the node")
+        wait_for(lambda: client.has_node(f"array_model_{sig.name}"), timeout=60, what="the node")
     finally:
         client.close()
     code, seconds, err = proc.stop(sig)

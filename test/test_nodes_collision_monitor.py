@@ -56,6 +56,12 @@ def feed(publisher, model, result, rows):
         publisher.publish(messages.joint_state(names, result.t[j], theta[j], omega[j], torque[j]))
 
 
+def wait_checked(diagnostics, samples):
+    """Until a verdict says the monitor has checked ``samples`` samples of this deployment."""
+    wait_for(lambda: any({kv.key: kv.value for kv in s.values}.get("samples") == str(samples)
+                         for s in statuses(diagnostics)), what=f"{samples} samples checked")
+
+
 def statuses(diagnostics, level=None):
     return [s for d in diagnostics for s in d.status
             if s.name == STATUS and (level is None or s.level == level)]
@@ -76,6 +82,7 @@ def test_first_event_names_the_pair_simulate_finds(graph, deployment):
     wait_for(lambda: markers, what="the collision markers")
     assert {m.text for m in markers[0].markers if m.ns == "collision"} == set(report.first_collision.names)
     wait_for(lambda: statuses(diagnostics, messages.ERROR), what="an ERROR verdict")
+    wait_checked(diagnostics, len(result.t))
 
 
 BAD = {
@@ -94,7 +101,7 @@ def test_malformed_joint_states_warn_and_the_verdict_stays_right(graph, deployme
     n = len(result.t)
     events.clear()
     feed(publisher, model, result, range(0, n // 2))
-    wait_for(lambda: statuses(diagnostics), what="diagnostics")
+    wait_checked(diagnostics, n // 2)
     diagnostics.clear()
     j = n // 2
     for spoil in BAD.values():
@@ -120,9 +127,10 @@ def test_reset_starts_a_new_deployment(graph, deployment):
     assert client.trigger("/collision_monitor/reset").success
     diagnostics.clear()
     feed(publisher, model, result, range(0, 20))  # before the collision: OK again
-    wait_for(lambda: any(s.level == messages.OK and {kv.key: kv.value for kv in s.values}
-                         .get("samples") == "20" for s in statuses(diagnostics)),
-             what="an OK verdict of the new deployment")
+    wait_checked(diagnostics, 20)
+    last = [s for s in statuses(diagnostics) if {kv.key: kv.value for kv in s.values}
+            .get("samples") == "20"][-1]
+    assert last.level == messages.OK and last.message == "no collision"
 
 
 @pytest.mark.parametrize("param, reason", [

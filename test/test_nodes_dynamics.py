@@ -134,11 +134,10 @@ def test_stiffness_per_group_is_accepted_and_read_back(graph):
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signals_end_the_node_cleanly(sig):
-    node = NodeProcess("dynamics")
+    node = NodeProcess("dynamics", node_name=f"dynamics_{sig.name}")
     client = Client("signal_test")
     try:
-        wait_for(lambda: client.node.count_publishers("/joint_states") >= 1, timeout=60,
-                 what="the node to start")
+        wait_for(lambda: client.has_node(f"dynamics_{sig.name}"), timeout=60, what="the node")
     finally:
         client.close()
     code, seconds, err = node.stop(sig)

@@ -32,17 +32,21 @@ def graph():
 def optimise(client):
     replies = []
 
-    def attempt():
+    def attempt():  # until the model is there and the last search has set its target
         replies.append(client.trigger("/optimiser/optimise"))
-        return replies[-1].success or "no model" not in replies[-1].message
-    wait_for(attempt, timeout=60, what="the model to reach the optimiser")
+        return replies[-1].success or not any(
+            why in replies[-1].message for why in ("no model", "running"))
+    wait_for(attempt, timeout=60, what="the optimiser to take a request")
     return replies[-1]
 
 
 def stiffness(client):
-    reply = client.call(GetParameters, "/dynamics/get_parameters",
-                        GetParameters.Request(names=["stiffness", "damping_ratio"]))
-    return list(reply.values[0].double_array_value), reply.values[1].double_value
+    """The dynamics node's (stiffness, damping_ratio); stiffness [] while unset."""
+    def get(name):
+        return client.call(GetParameters, "/dynamics/get_parameters",
+                           GetParameters.Request(names=[name])).values
+    k = get("stiffness")
+    return (list(k[0].double_array_value) if k else []), get("damping_ratio")[0].double_value
 
 
 def test_optimise_reports_progress_and_sets_the_target(graph):
@@ -51,7 +55,7 @@ def test_optimise_reports_progress_and_sets_the_target(graph):
     reply = optimise(client)
     assert reply.success, reply.message
     second = client.trigger("/optimiser/optimise")
-    assert not second.success and "running" in second.message
+    assert not second.success and "running" in second.message, second.message
     wait_for(lambda: results, timeout=120, what="a result")
     result = yaml.safe_load(results[-1].data)
     assert progress and {kv.key for kv in progress[0].status[0].values} >= {

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from rclpy.node import Node
 from std_msgs.msg import String
-from std_srvs.srv import Trigger
 
 from ..errors import PanelDeployError
 from ..export.urdf import model_urdf
@@ -29,7 +28,7 @@ class ArrayModelNode(Node):
         runtime.validator(self, self._check)
         self.description = self.create_publisher(String, "/robot_description", messages.LATCHED)
         self.model_pub = self.create_publisher(String, "/panel_deploy/model", messages.LATCHED)
-        self.create_service(Trigger, "~/reload", self._reload)
+        runtime.trigger_service(self, "~/reload", self._reload)
         self.scene, self.model, text = load_array(**runtime.values(self, PARAMETERS))
         self._publish(text)
 

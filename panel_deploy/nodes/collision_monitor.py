@@ -16,7 +16,6 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
-from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from ..build import build_model
@@ -46,7 +45,7 @@ class CollisionMonitorNode(Node):
                                              messages.EVENTS)
         self.create_subscription(String, "/panel_deploy/model", self._on_model, messages.LATCHED)
         self.create_subscription(JointState, "/joint_states", self._on_joint_state, messages.STREAM)
-        self.create_service(Trigger, "~/reset", self._reset)
+        runtime.trigger_service(self, "~/reset", self._reset)
         self.create_timer(0.5, self._publish_verdict)
         self.scene = None
         self.stream = None  # StreamCheck of the current model

@@ -18,7 +18,6 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
-from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from ..errors import PanelDeployError
@@ -51,8 +50,8 @@ class DynamicsNode(Node):
         self.clock = self.create_publisher(Clock, "/clock", messages.EVENTS)
         self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", messages.EVENTS)
         self.create_subscription(String, "/panel_deploy/model", self._on_model, messages.LATCHED)
-        self.create_service(Trigger, "~/deploy", self._deploy)
-        self.create_service(Trigger, "~/stop", self._stop)
+        runtime.trigger_service(self, "~/deploy", self._deploy)
+        runtime.trigger_service(self, "~/stop", self._stop)
         self.scene = None
         self.deployment = None  # the current or last Deployment
         self.summary = None     # deployment_summary of the last finished run

@@ -48,20 +48,17 @@ class Driver(Node):
 
     def call(self, service: str) -> str:
         client = self.create_client(Trigger, service, callback_group=self.group)
-        try:
-            if not client.wait_for_service(timeout_sec=TIMEOUT):
-                raise RuntimeError(f"{service}: no such service")
-            done = threading.Event()
-            future = client.call_async(Trigger.Request())
-            future.add_done_callback(lambda _: done.set())
-            if not done.wait(TIMEOUT):
-                raise RuntimeError(f"{service}: no answer")
-            reply = future.result()
-            if not reply.success:
-                raise RuntimeError(f"{service}: {reply.message}")
-            return reply.message
-        finally:
-            self.destroy_client(client)
+        if not client.wait_for_service(timeout_sec=TIMEOUT):
+            raise RuntimeError(f"{service}: no such service")
+        done = threading.Event()
+        future = client.call_async(Trigger.Request())
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(TIMEOUT):
+            raise RuntimeError(f"{service}: no answer")
+        reply = future.result()
+        if not reply.success:
+            raise RuntimeError(f"{service}: {reply.message}")
+        return reply.message
 
     def _on_events(self, msg):
         for s in msg.status:

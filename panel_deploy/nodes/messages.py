@@ -155,8 +155,9 @@ def _value(v) -> str:
 
 def status(name: str, level: int, message: str, values: dict | None = None,
            hardware_id: str = "panel_array") -> DiagnosticStatus:
-    """A DiagnosticStatus; ``values`` become key-values (None as empty string)."""
-    return DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id,
+    """A DiagnosticStatus; ``level`` OK, WARN, ERROR or 0, 1, 2; ``values``
+    become key-values (None as empty string)."""
+    return DiagnosticStatus(level=level if isinstance(level, bytes) else bytes([level]), name=name, message=message, hardware_id=hardware_id,
                             values=[KeyValue(key=str(k), value="" if v is None else _value(v))
                                     for k, v in (values or {}).items()])
 

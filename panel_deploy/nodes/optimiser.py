@@ -17,7 +17,6 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
-from std_srvs.srv import Trigger
 
 from ..build import build_model
 from ..errors import PanelDeployError
@@ -48,9 +47,10 @@ class OptimiserNode(Node):
         self.progress = self.create_publisher(DiagnosticArray, "~/progress", messages.EVENTS)
         self.result_pub = self.create_publisher(String, "~/result", messages.LATCHED)
         self.create_subscription(String, "/panel_deploy/model", self._on_model, messages.LATCHED)
-        self.create_service(Trigger, "~/optimise", self._optimise)
-        self.create_service(Trigger, "~/cancel", self._cancel)
+        runtime.trigger_service(self, "~/optimise", self._optimise)
+        runtime.trigger_service(self, "~/cancel", self._cancel)
         self._client_group = MutuallyExclusiveCallbackGroup()
+        self._targets = {}  # set_parameters clients by service name
         self.scene = None
         self.result = None  # the last OptimisationResult
         self._cancel_event = threading.Event()
@@ -124,22 +124,22 @@ class OptimiserNode(Node):
         if result.problem.damping_variable:
             values.append(Parameter("damping_ratio", Parameter.Type.DOUBLE,
                                     float(result.c[0] / result.k[0])))
-        client = self.create_client(SetParameters, f"/{target.lstrip('/')}/set_parameters",
-                                    callback_group=self._client_group)
-        try:
-            if not client.wait_for_service(timeout_sec=5.0):
-                return self.get_logger().error(f"{target}: no set_parameters service")
-            done = threading.Event()
-            future = client.call_async(SetParameters.Request(
-                parameters=[v.to_parameter_msg() for v in values]))
-            future.add_done_callback(lambda _: done.set())
-            if not done.wait(10.0):
-                return self.get_logger().error(f"{target}: set_parameters did not answer")
-            refused = [r.reason for r in future.result().results if not r.successful]
-            if refused:
-                self.get_logger().error(f"{target} refused the result: {refused[0]}")
-        finally:
-            self.destroy_client(client)
+        service = f"/{target.lstrip('/')}/set_parameters"
+        if service not in self._targets:  # kept: destroying a client under a spinning executor blocks
+            self._targets[service] = self.create_client(SetParameters, service,
+                                                        callback_group=self._client_group)
+        client = self._targets[service]
+        if not client.wait_for_service(timeout_sec=5.0):
+            return self.get_logger().error(f"{target}: no set_parameters service")
+        done = threading.Event()
+        future = client.call_async(SetParameters.Request(
+            parameters=[v.to_parameter_msg() for v in values]))
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(10.0):
+            return self.get_logger().error(f"{target}: set_parameters did not answer")
+        refused = [r.reason for r in future.result().results if not r.successful]
+        if refused:
+            self.get_logger().error(f"{target} refused the result: {refused[0]}")
 
     def _cancel(self, request, response):
         if not self.running:

@@ -19,6 +19,7 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
+from std_srvs.srv import Trigger
 
 from ..errors import PanelDeployError
 
@@ -39,10 +40,29 @@ def values(node, names) -> dict:
     out = {}
     for name in names:
         try:
-            out[name] = node.get_parameter(name).value
+            out[name] = _plain(node.get_parameter(name).value)
         except ParameterUninitializedException:
             out[name] = ()
     return out
+
+
+def _plain(value):
+    """Array parameter values (rclpy gives ``array.array``) as tuples."""
+    return value if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") else tuple(value)
+
+
+def trigger_service(node, name, callback):
+    """A ``std_srvs/Trigger`` service whose callback cannot leave a caller
+    without an answer: an unexpected error becomes ``success=False`` with
+    its message, and is logged."""
+    def guarded(request, response):
+        try:
+            return callback(request, response)
+        except Exception as e:  # the node lives on; the caller learns why
+            node.get_logger().error(f"{name} failed: {type(e).__name__}: {e}")
+            response.success, response.message = False, f"failed: {type(e).__name__}: {e}"
+            return response
+    return node.create_service(Trigger, name, guarded)
 
 
 def validator(node, check):
@@ -51,10 +71,11 @@ def validator(node, check):
     whose message reaches the caller as the reason."""
     def callback(params):
         try:
-            check({p.name: (tuple(p.value) if isinstance(p.value, (list, tuple)) or
-                            type(p.value).__name__ == "array" else p.value) for p in params})
+            check({p.name: _plain(p.value) for p in params})
         except PanelDeployError as e:
             return SetParametersResult(successful=False, reason=str(e))
+        except Exception as e:  # a bug must not accept a value unchecked
+            return SetParametersResult(successful=False, reason=f"{type(e).__name__}: {e}")
         return SetParametersResult(successful=True)
     node.add_on_set_parameters_callback(callback)
 

@@ -14,7 +14,6 @@ import math
 
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
-from scipy.spatial.transform import Rotation
 
 from ..export.urdf import WORLD, link_poses
 
@@ -54,7 +53,7 @@ PANEL_COLOUR = (0.25, 0.45, 0.85, 1.0)
 
 def serialize(message) -> bytes:
     """CDR bytes (little endian, with the encapsulation header) of a rosbags message."""
-    return bytes(TYPESTORE.serialize_cdr(message, message.__msgtype__))
+    return bytes(TYPESTORE.serialize_cdr(message, message.__msgtype__, little_endian=True))
 
 
 def deserialize(data, typename: str):
@@ -109,11 +108,33 @@ def joint_state(names, t: float, theta, omega, torque):
                            effort=np.asarray(torque, dtype=np.float64))
 
 
+def quaternions(R) -> np.ndarray:
+    """Unit quaternions (x, y, z, w) of rotation matrices ``R`` (k, 3, 3), w >= 0.
+
+    Shepperd's method: each quaternion is computed from its largest
+    component, so there is no division by a small number.
+    """
+    R = np.asarray(R, dtype=float)
+    m00, m11, m22 = R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]
+    # 4 x^2, 4 y^2, 4 z^2, 4 w^2
+    d = np.stack([1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22,
+                  1 + m00 + m11 + m22], axis=1)
+    big = np.argmax(d, axis=1)
+    s = 2 * np.sqrt(d[np.arange(len(R)), big])  # 4 times the largest component
+    yz, xz, xy = R[:, 1, 2] + R[:, 2, 1], R[:, 0, 2] + R[:, 2, 0], R[:, 0, 1] + R[:, 1, 0]
+    wx, wy, wz = R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]
+    quarter = s * s / 4
+    # Row j: 4 * the largest component times (x, y, z, w), if component j is the largest.
+    candidates = np.array([[quarter, xy, xz, wx], [xy, quarter, yz, wy],
+                           [xz, yz, quarter, wz], [wx, wy, wz, quarter]])  # (4, 4, k)
+    q = candidates[big, :, np.arange(len(R))] / s[:, None]
+    return q * np.where(q[:, 3:] < 0, -1.0, 1.0)
+
+
 def _quaternions(R):
     """``geometry_msgs/Quaternion`` of every rotation matrix in ``R`` (k, 3, 3)."""
     q = _T["geometry_msgs/msg/Quaternion"]
-    return [q(x=float(x), y=float(y), z=float(z), w=float(w))
-            for x, y, z, w in Rotation.from_matrix(R).as_quat()]
+    return [q(x=x, y=y, z=z, w=w) for x, y, z, w in quaternions(R).tolist()]
 
 
 def _vector(v, kind="Vector3"):

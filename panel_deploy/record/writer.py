@@ -13,8 +13,9 @@ durations from the MCAP statistics), Foxglove and rerun open it as it is.
 
 Chunks close after :attr:`Recorder.chunk_span` seconds of log time (and at
 :attr:`Recorder.chunk_bytes`) and are flushed to the operating system at
-once: a process killed at any moment leaves every closed chunk readable, so
-at most ``chunk_span`` of log time (plus the sample in flight) is lost.
+once (:mod:`.mcap_file` writes the records): a process killed at any moment
+leaves every closed chunk readable, so at most ``chunk_span`` of log time
+(plus the samples in flight) is lost.
 """
 
 from __future__ import annotations
@@ -26,11 +27,11 @@ from importlib.metadata import version
 from pathlib import Path
 
 import yaml
-from mcap.writer import CompressionType, Writer
 
 from .. import __version__
 from ..errors import TrajectoryError
 from . import messages
+from .mcap_file import McapFile
 
 #: rmw's "infinite" duration (``RMW_DURATION_INFINITE``) as rosbag2 stores it.
 _INFINITE = {"sec": 9223372036, "nsec": 854775807}
@@ -68,7 +69,7 @@ class Recorder:
     chunk_span : float
         s of log time after which the open chunk is closed and flushed.
     chunk_bytes : int
-        Serialized message bytes after which the open chunk is closed anyway.
+        Uncompressed bytes after which the open chunk is closed anyway.
 
     Raises
     ------
@@ -84,14 +85,11 @@ class Recorder:
             self._stream = open(self.path, "wb")
         except OSError as e:
             raise TrajectoryError(f"{self.path}: cannot write the recording ({e.strerror})") from None
-        # chunk_size is a ceiling never reached: this class closes the chunks.
-        self._writer = Writer(self._stream, chunk_size=1 << 40, compression=CompressionType.ZSTD)
-        self._writer.start(profile="ros2", library=f"panel_deploy {__version__}")
+        self._file = McapFile(self._stream, "ros2", f"panel_deploy {__version__}")
         self._schemas: dict = {}    # type name -> schema id
         self._channels: dict = {}   # topic -> (channel id, type name)
         self._counts: dict = {}     # topic -> messages
         self._chunk_start = None    # log time (ns) of the open chunk's first message
-        self._chunk_size = 0
         self.first_time = self.last_time = None
         self.closed = False
 
@@ -109,12 +107,13 @@ class Recorder:
                 raise TrajectoryError(f"{self.path}: {topic} is {known}, cannot also record {typename}")
             return cid
         if typename not in self._schemas:
-            self._schemas[typename] = self._writer.register_schema(
-                typename, "ros2msg", messages.msgdef(typename).encode())
-        cid = self._writer.register_channel(
-            topic, "cdr", self._schemas[typename],
-            {"offered_qos_profiles": _yaml(_qos_for(topic)),
-             "topic_type_hash": messages.type_hash(typename)})
+            self._schemas[typename] = len(self._schemas) + 1
+            self._file.schema(self._schemas[typename], typename, "ros2msg",
+                              messages.msgdef(typename).encode())
+        cid = len(self._channels) + 1
+        self._file.channel(cid, self._schemas[typename], topic, "cdr",
+                           {"offered_qos_profiles": _yaml(_qos_for(topic)),
+                            "topic_type_hash": messages.type_hash(typename)})
         self._channels[topic] = (cid, typename)
         self._counts[topic] = 0
         return cid
@@ -133,31 +132,32 @@ class Recorder:
             ns; simulated time for a deployment.
         """
         cid = self.channel(topic, typename)
-        data = message if isinstance(message, (bytes, bytearray, memoryview)) else \
-            messages.serialize(message)
-        if self._chunk_start is not None and (log_time - self._chunk_start
-                                              >= self.chunk_span * 1e9
-                                              or self._chunk_size >= self.chunk_bytes):
+        data = message if isinstance(message, bytes) else (
+            bytes(message) if isinstance(message, (bytearray, memoryview)) else
+            messages.serialize(message))
+        if self._chunk_start is not None and (log_time - self._chunk_start >= self.chunk_span * 1e9
+                                              or self._file.chunk_bytes >= self.chunk_bytes):
             self.flush()
         if self._chunk_start is None:
             self._chunk_start = log_time
-        self._writer.add_message(cid, log_time=log_time, data=bytes(data), publish_time=log_time)
-        self._chunk_size += len(data)
+        self._file.message(cid, log_time, data)
         self._counts[topic] += 1
-        self.first_time = log_time if self.first_time is None else min(self.first_time, log_time)
-        self.last_time = log_time if self.last_time is None else max(self.last_time, log_time)
+        if self.first_time is None:
+            self.first_time = self.last_time = log_time
+        else:
+            self.first_time = min(self.first_time, log_time)
+            self.last_time = max(self.last_time, log_time)
 
     def flush(self) -> None:
         """Close the open chunk and hand everything written to the operating system."""
-        self._writer.flush()
-        self._chunk_start, self._chunk_size = None, 0
+        self._file.close_chunk()
+        self._chunk_start = None
 
     def metadata(self, name: str, values: dict) -> None:
         """An MCAP metadata record: ``values`` become strings (JSON, which is
         also YAML, for anything but a string). Written at once, between chunks."""
-        text = {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in values.items()}
-        self._writer.add_metadata(name, text)
-        self._stream.flush()
+        self._file.metadata(name, {str(k): v if isinstance(v, str) else json.dumps(v)
+                                   for k, v in values.items()})
 
     def bag_metadata(self) -> dict:
         """rosbag2's ``BagMetadata`` (version 9) of what has been written."""
@@ -188,8 +188,8 @@ class Recorder:
         if self.closed:
             return
         self.flush()
-        self._writer.add_metadata("rosbag2", {"serialized_metadata": _yaml(self.bag_metadata())})
-        self._writer.finish()
+        self._file.metadata("rosbag2", {"serialized_metadata": _yaml(self.bag_metadata())})
+        self._file.finish()
         self._stream.close()
         self.closed = True
 

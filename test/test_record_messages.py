@@ -1,0 +1,160 @@
+"""panel_deploy.record.messages and .cdr: message contents, CDR bytes, schemas and type hashes.
+
+The fast per-sample encoder is checked byte for byte against rosbags'
+serializer; both are decoded by rclpy's own type support (the real ROS
+deserializer) and by the schema text we write (mcap-ros2-support, the
+parser Foxglove's web decoder mirrors).
+"""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from panel_deploy.build import build_model
+from panel_deploy.dynamics.report import hinge_order
+from panel_deploy.export.urdf import link_poses
+from panel_deploy.kinematics import forward_kinematics
+from panel_deploy.live import Sample
+from panel_deploy.record import messages as m
+from panel_deploy.record.cdr import SampleEncoder
+from panel_deploy.scene import load_scene, resolve_scene
+
+
+@pytest.fixture(scope="module")
+def model():
+    return build_model(load_scene(resolve_scene("paper_4x4")))
+
+
+@pytest.fixture(scope="module")
+def names(model):
+    return [model.hinges[h].name for h in hinge_order(model)]
+
+
+def _samples(model, names, count=12, seed=0):
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(count):
+        R, p = forward_kinematics(model, rng.uniform(0, np.pi, model.n_coords))
+        theta, omega, torque = rng.normal(size=(3, len(names)))
+        out.append(Sample(float(rng.uniform(0, 5)), theta, omega, torque, R, p))
+    return out
+
+
+def test_quaternions_match_scipy_up_to_sign():
+    R = Rotation.random(500, random_state=3).as_matrix()
+    R = np.concatenate([R, np.eye(3)[None], Rotation.from_rotvec([[np.pi, 0, 0]]).as_matrix()])
+    q = m.quaternions(R)
+    assert np.all(q[:, 3] >= 0) and np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-15)
+    assert np.allclose(Rotation.from_quat(q).as_matrix(), R, atol=1e-14)
+
+
+def test_encoder_bytes_equal_rosbags_serializer(model, names):
+    samples = _samples(model, names)
+    encoded = SampleEncoder(model, names).encode(samples)
+    for s, (clock, joint_state, panels, tf) in zip(samples, encoded):
+        assert clock == m.serialize(m.clock(s.t))
+        assert joint_state == m.serialize(m.joint_state(names, s.t, s.theta, s.omega, s.torque))
+        assert panels == m.serialize(m.panel_markers(model, s.rotation, s.position, s.t))
+        assert tf == m.serialize(m.tf_message(model, s.rotation, s.position, s.t))
+
+
+def test_tf_composes_to_the_link_poses(model, names):
+    s = _samples(model, names, count=1, seed=4)[0]
+    R, p = link_poses(model, s.rotation, s.position)
+    tf = m.tf_message(model, s.rotation, s.position, s.t)
+    names_of = [b.name for b in model.bodies]
+    static = m.tf_static(model).transforms[0]
+    assert static.header.frame_id == "world" and static.child_frame_id == names_of[model.ground]
+    world = {"world": (np.eye(3), np.zeros(3))}
+    world[static.child_frame_id] = (np.eye(3), _xyz(static.transform.translation))
+    pending = list(tf.transforms)
+    while pending:  # parents come first in coordinate order, but do not rely on it
+        t = pending.pop(0)
+        if t.header.frame_id not in world:
+            pending.append(t)
+            continue
+        Rp, pp = world[t.header.frame_id]
+        q = t.transform.rotation
+        Rc = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+        world[t.child_frame_id] = (Rp @ Rc, pp + Rp @ _xyz(t.transform.translation))
+    assert sorted(world) == sorted(["world", *names_of])
+    for b, name in enumerate(names_of):
+        assert np.allclose(world[name][0], R[b], atol=1e-12)
+        assert np.allclose(world[name][1], p[b], atol=1e-12)
+
+
+def _xyz(v):
+    return np.array([v.x, v.y, v.z])
+
+
+def test_panel_markers_are_cubes_of_the_true_size(model):
+    R, p = forward_kinematics(model, model.theta_stowed)
+    markers = m.panel_markers(model, R, p, 0.25).markers
+    assert len(markers) == model.n_bodies
+    for b, marker in enumerate(markers):
+        assert marker.type == 1 and marker.header.frame_id == "world"  # CUBE
+        assert np.allclose([marker.scale.x, marker.scale.y, marker.scale.z], model.bodies[b].size)
+        assert np.allclose(_xyz(marker.pose.position), p[b])
+        assert marker.text == model.bodies[b].name
+
+
+@pytest.mark.parametrize("topic", sorted(m.TOPICS))
+def test_type_hash_is_the_jazzy_interface_hash(topic):
+    """rosbag2 stores the RIHS01 hash; it must equal the installed Jazzy interfaces' own."""
+    typename = m.TOPICS[topic][0]
+    found = list(Path(sys.prefix).glob(f"share/{typename}.json"))
+    if not found:
+        pytest.skip(f"{typename}.json not installed (tf2_msgs is not pip-installable)")
+    hashes = json.loads(found[0].read_text())["type_hashes"]
+    expected = next(h["hash_string"] for h in hashes if h["type_name"] == typename)
+    assert m.type_hash(typename) == expected
+
+
+@pytest.mark.parametrize("typename", sorted({t for t, _ in m.TOPICS.values()}))
+def test_schema_text_decodes_our_bytes(model, names, typename):
+    """mcap-ros2-support builds its decoder from the schema text alone, as Foxglove does."""
+    from mcap.records import Schema
+    from mcap_ros2.decoder import DecoderFactory
+
+    s = _samples(model, names, count=1, seed=1)[0]
+    built = {m.STRING: m.string("<robot/>"), m.JOINT_STATE: m.joint_state(names, s.t, s.theta, s.omega, s.torque),
+             m.MARKER_ARRAY: m.panel_markers(model, s.rotation, s.position, s.t),
+             m.DIAGNOSTIC_ARRAY: m.diagnostics(s.t, m.status("x", m.WARN, "text", {"a": 1.5, "b": None})),
+             m.CLOCK: m.clock(s.t), m.TF_MESSAGE: m.tf_message(model, s.rotation, s.position, s.t)}
+    schema = Schema(id=1, name=typename, encoding="ros2msg", data=m.msgdef(typename).encode())
+    decoded = DecoderFactory().decoder_for("cdr", schema)(m.serialize(built[typename]))
+    if typename == m.JOINT_STATE:
+        assert list(decoded.name) == names and np.allclose(decoded.position, s.theta)
+    elif typename == m.TF_MESSAGE:
+        assert len(decoded.transforms) == model.n_coords
+    elif typename == m.MARKER_ARRAY:
+        assert [x.text for x in decoded.markers] == [b.name for b in model.bodies]
+
+
+def test_rclpy_deserializes_what_we_encode(model, names):
+    """The real ROS type support decodes every type it has (tf2_msgs is not pip-installable)."""
+    pytest.importorskip("rclpy")
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import deserialize_message
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+    from visualization_msgs.msg import MarkerArray
+
+    s = _samples(model, names, count=1, seed=2)[0]
+    clock, joint_state, panels, _ = SampleEncoder(model, names).encode([s])[0]
+    js = deserialize_message(joint_state, JointState)
+    assert list(js.name) == names and np.array_equal(js.position, s.theta)
+    assert np.array_equal(js.velocity, s.omega) and np.array_equal(js.effort, s.torque)
+    assert js.header.stamp.sec * 10**9 + js.header.stamp.nanosec == m.nanoseconds(s.t)
+    markers = deserialize_message(panels, MarkerArray).markers
+    assert [x.text for x in markers] == [b.name for b in model.bodies]
+    assert np.allclose([[x.pose.position.x, x.pose.position.y, x.pose.position.z] for x in markers],
+                       s.position, atol=0)
+    assert deserialize_message(clock, Clock).clock.nanosec == m.nanoseconds(s.t) % 10**9
+    diag = deserialize_message(m.serialize(m.diagnostics(1.5, m.status("n", m.ERROR, "msg", {"k": 2.0}))),
+                               DiagnosticArray)
+    assert diag.status[0].level == b"\x02" and diag.status[0].values[0].value == "2.0"

@@ -1,0 +1,177 @@
+"""The node suite's speed on the paper scene (not a test: prints medians and ratios).
+
+    python bench/bench_nodes.py [--repeats R]
+
+1. ``dynamics`` at real_time_factor 0 (its own process, the way ``ros2 run``
+   starts it): wall time from ``~/deploy`` to the last of the 401
+   ``/joint_states`` received by a client in this process, against the core
+   ``simulate`` of the same run here, side by side (goal: at most 1.5x).
+2. ``collision_monitor``: time the node spends per JointState (parse + the
+   streaming check), median and p99 over a whole 2 s deployment sampled at
+   1 kHz, and the rate that keeps up (1 / mean); then the same stream sent
+   to the node process at 1 kHz of wall time, and how long after the last
+   message its verdict has caught up (goal: 1 kHz, an encoder's rate).
+3. Latency from the JointState that reveals the first collision (published
+   at 200 Hz real time) to its event on ``/panel_deploy/collision_events``.
+
+DDS stays on this machine (see test/ros_env.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "test"))
+import ros_env  # noqa: E402
+
+ros_env.isolate()
+
+import numpy as np  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from panel_deploy.dynamics import simulate  # noqa: E402
+from panel_deploy.dynamics.report import hinge_states  # noqa: E402
+from panel_deploy.live import DynamicsParameters, configure  # noqa: E402
+from panel_deploy.nodes import messages  # noqa: E402
+from panel_deploy.scene import load_scene, resolve_scene  # noqa: E402
+from ros_harness import Client, NodeProcess, wait_for  # noqa: E402
+
+
+def paper(rate_hz, t_end=None):
+    return configure(load_scene(resolve_scene("paper_4x4")),
+                     DynamicsParameters(rate_hz=rate_hz, t_end=t_end or 0.0))
+
+
+def dynamics_throughput(client, repeats):
+    scene, model = paper(200.0)
+    core = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        simulate(model, scene.simulation)
+        core.append(time.perf_counter() - start)
+    states = client.listen(JointState, "/joint_states", messages.STREAM)
+    node = []
+    for _ in range(repeats):
+        states.clear()
+        start = time.perf_counter()
+        reply = client.trigger("/dynamics/deploy")
+        assert reply.success, reply.message
+        wait_for(lambda: len(states) >= scene.simulation.samples, timeout=120, what="the run")
+        node.append(time.perf_counter() - start)
+        wait_for(lambda: not client.trigger("/dynamics/stop").success, what="the node to finish")
+    t_end = scene.simulation.t_end
+    c, n = np.median(core), np.median(node)
+    print(f"dynamics, paper scene {t_end:g} s at 200 Hz, median of {repeats}:")
+    print(f"  core simulate      {c:7.3f} s wall  {t_end / c:6.2f} simulated s per wall s")
+    print(f"  dynamics node      {n:7.3f} s wall  {t_end / n:6.2f} simulated s per wall s "
+          f"(deploy call to last JointState received)")
+    print(f"  ratio node / core  {n / c:6.2f}x  (goal <= 1.5x)")
+
+
+def monitor_cost(rate_hz=1000.0):
+    from panel_deploy.nodes.collision_monitor import CollisionMonitorNode
+    import rclpy
+    scene, model = paper(rate_hz)
+    result = simulate(model, scene.simulation)
+    names, theta, omega, torque = hinge_states(model, result)
+    msgs = [messages.joint_state(names, result.t[j], theta[j], omega[j], torque[j])
+            for j in range(len(result.t))]
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = CollisionMonitorNode(context=context)
+    try:
+        node._on_model(messages.string(open(resolve_scene("paper_4x4")).read()))
+        times = np.empty(len(msgs))
+        for j, msg in enumerate(msgs):
+            start = time.perf_counter()
+            node._on_joint_state(msg)
+            times[j] = time.perf_counter() - start
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    print(f"collision_monitor, paper scene 2 s at {rate_hz:g} Hz ({len(msgs)} JointStates, "
+          f"refine on), time per message in the node's callback:")
+    print(f"  median {np.median(times) * 1e3:.3f} ms  p99 {np.percentile(times, 99) * 1e3:.3f} ms  "
+          f"max {times.max() * 1e3:.1f} ms  mean {times.mean() * 1e3:.3f} ms "
+          f"-> keeps up with {1 / times.mean():.0f} Hz on average")
+    return msgs
+
+
+def monitor_live(client, msgs, rate_hz=1000.0):
+    publisher = client.node.create_publisher(JointState, "/joint_states", messages.STREAM)
+    diagnostics = client.listen(DiagnosticArray, "/diagnostics")
+    wait_for(lambda: publisher.get_subscription_count() >= 1, what="the monitor")
+    client.trigger("/collision_monitor/reset")
+    start = time.perf_counter()
+    for j, msg in enumerate(msgs):
+        while time.perf_counter() < start + j / rate_hz:
+            pass
+        publisher.publish(msg)
+    sent = time.perf_counter()
+
+    def caught_up():
+        return any(kv.key == "samples" and kv.value == str(len(msgs))
+                   for d in diagnostics for s in d.status for kv in s.values)
+    wait_for(caught_up, timeout=300, what="the monitor to catch up")
+    lag = time.perf_counter() - sent
+    print(f"  live, node process fed at {rate_hz:g} Hz for {sent - start:.2f} s: verdict on every "
+          f"sample {lag:.2f} s after the last message (verdicts go out every 0.5 s)")
+
+
+def event_latency(client):
+    scene, model = paper(200.0, t_end=0.6)
+    result = simulate(model, scene.simulation)
+    names, theta, omega, torque = hinge_states(model, result)
+    publisher = client.node.create_publisher(JointState, "/joint_states", messages.STREAM)
+    events = client.listen(DiagnosticArray, "/panel_deploy/collision_events")
+    client.trigger("/collision_monitor/reset")
+    events.clear()
+    sent, arrived = {}, []
+    start = time.perf_counter()
+    for j in range(len(result.t)):
+        while time.perf_counter() < start + result.t[j]:
+            if events and not arrived:
+                arrived.append(time.perf_counter())
+        sent[j] = time.perf_counter()
+        publisher.publish(messages.joint_state(names, result.t[j], theta[j], omega[j], torque[j]))
+    wait_for(lambda: events, what="the event")
+    if not arrived:
+        arrived.append(time.perf_counter())
+    sample = int(next(kv.value for kv in events[0].status[0].values if kv.key == "sample"))
+    print(f"latency from the JointState that reveals the first collision (sample {sample}, "
+          f"200 Hz real time) to its event: {(arrived[0] - sent[sample]) * 1e3:.1f} ms "
+          f"(resolution: one 5 ms sample period)")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args()
+    # The monitor starts after the dynamics figures: on 2 cores it would take CPU from them.
+    procs = [NodeProcess("array_model", "scene:=paper_4x4"),
+             NodeProcess("dynamics", "real_time_factor:=0.0")]
+    client = Client("bench_nodes")
+    try:
+        def deployable():  # the model has reached the node
+            reply = client.trigger("/dynamics/deploy")
+            return reply.success or "no model" not in reply.message
+        wait_for(deployable, timeout=120, what="the dynamics node")
+        wait_for(lambda: not client.trigger("/dynamics/stop").success, what="the first run")
+        dynamics_throughput(client, args.repeats)
+        procs[1].stop()
+        procs.append(NodeProcess("collision_monitor"))
+        msgs = monitor_cost()
+        monitor_live(client, msgs)
+        event_latency(client)
+    finally:
+        client.close()
+        for p in procs:
+            p.stop()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,19 @@
+"""Keep DDS on this machine: localhost discovery, a domain of this process's own,
+and the repository's Fast DDS profile (UDPv4 on 127.0.0.1 plus shared memory).
+
+Call :func:`isolate` before rclpy starts; node processes started afterwards
+inherit the environment.
+"""
+
+import os
+from pathlib import Path
+
+PROFILE = Path(__file__).resolve().parent.parent / "config" / "fastdds_loopback.xml"
+
+
+def isolate(domain: int | None = None) -> None:
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+    os.environ["ROS_DOMAIN_ID"] = str(domain if domain is not None else 1 + os.getpid() % 100)
+    os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(PROFILE)
+    os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")

@@ -80,6 +80,11 @@ def collision_events(d: RecordedDeployment):
     return distance, check.first_events
 
 
+def _duration(t):
+    """Seconds as exact nanosecond durations (a float second count would be truncated)."""
+    return np.round(np.asarray(t) * 1e9).astype(np.int64).astype("timedelta64[ns]")
+
+
 def _path(*parts) -> str:
     import rerun as rr
     return "/".join(rr.escape_entity_path_part(p) for p in parts)
@@ -90,7 +95,7 @@ def log_deployment(stream, d: RecordedDeployment) -> int:
     import rerun as rr
 
     t = d.track.t
-    time = [rr.TimeColumn(TIMELINE, duration=t)]
+    time = [rr.TimeColumn(TIMELINE, duration=_duration(t))]
     model = d.model
     R, p = body_poses(d)
     distance, events = collision_events(d)
@@ -103,10 +108,10 @@ def log_deployment(stream, d: RecordedDeployment) -> int:
         stream.send_columns(path, time, rr.Transform3D.columns(translation=p[:, b],
                                                                mat3x3=R[:, b]))
         colour = GROUND_RGBA if b == model.ground else PANEL_RGBA
-        stream.set_time(TIMELINE, duration=float(t[0]))
+        stream.set_time(TIMELINE, duration=_duration(t[0]))
         stream.log(path, rr.Boxes3D.from_fields(colors=[colour]))
         if b in hit:
-            stream.set_time(TIMELINE, duration=float(t[hit[b]]))
+            stream.set_time(TIMELINE, duration=_duration(t[hit[b]]))
             stream.log(path, rr.Boxes3D.from_fields(colors=[HIT_RGBA]))
     positions = d.states.position
     for k, name in enumerate(d.states.names):
@@ -115,10 +120,10 @@ def log_deployment(stream, d: RecordedDeployment) -> int:
     for kind, values in energies(d).items():
         stream.send_columns(_path("energy", kind), time, rr.Scalars.columns(scalars=values))
     finite = np.isfinite(distance)
-    stream.send_columns(_path("distance", "d"), [rr.TimeColumn(TIMELINE, duration=t[finite])],
+    stream.send_columns(_path("distance", "d"), [rr.TimeColumn(TIMELINE, duration=_duration(t[finite]))],
                         rr.Scalars.columns(scalars=distance[finite]))
     for e in events:
-        stream.set_time(TIMELINE, duration=float(t[e.sample]))
+        stream.set_time(TIMELINE, duration=_duration(t[e.sample]))
         speed = e.approach_speed if np.isfinite(e.approach_speed) else e.normal_speed
         stream.log("events", rr.TextLog(f"collision between {e.names[0]} and {e.names[1]} at "
                                         f"t = {e.t:.4f} s, approach speed {speed:.4f} m/s",
@@ -168,6 +173,8 @@ def replay_command(args) -> int:
     import rerun as rr
 
     stream = rr.RecordingStream("panel_deploy")
+    stream.set_log_time_enabled(False)  # sim_time is the one timeline
+    stream.set_log_tick_enabled(False)
     if args.save:
         stream.save(args.save, default_blueprint=blueprint())
     elif args.serve:

@@ -1,0 +1,124 @@
+"""``panel-deploy replay``: the .rrd it saves read back with rerun, the PNG strip, --serve on 127.0.0.1."""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections import defaultdict
+
+import numpy as np
+import pytest
+
+from panel_deploy.build import build_model
+from panel_deploy.cli import main
+from panel_deploy.scene import load_scene, resolve_scene
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    path = tmp_path_factory.mktemp("replay") / "paper.mcap"
+    assert main(["simulate", "paper_4x4", "--record", str(path)]) == 0
+    return path
+
+
+@pytest.fixture(scope="module")
+def model():
+    return build_model(load_scene(resolve_scene("paper_4x4")))
+
+
+def _entities(rrd):
+    """entity -> {component: [values]}, and entity -> set of sim_time stamps (ns)."""
+    from rerun.chunk import RrdReader
+
+    values, times = defaultdict(lambda: defaultdict(list)), defaultdict(set)
+    reader = RrdReader(rrd)
+    assert reader.blueprints(), "the .rrd carries its blueprint"
+    for chunk in reader.stream():
+        batch = chunk.to_record_batch()
+        for name in batch.schema.names:
+            if name == "sim_time":
+                times[chunk.entity_path] |= {x.value for x in batch.column(name)}
+            elif ":" in name:
+                values[chunk.entity_path][name] += [x for x in batch.column(name).to_pylist() if x]
+    return values, times
+
+
+def test_saved_rrd_has_every_panel_moving_one_frame_per_sample(recording, model, tmp_path, capsys):
+    rrd = tmp_path / "paper.rrd"
+    assert main(["replay", str(recording), "--save", str(rrd)]) == 0
+    assert "401 frames" in capsys.readouterr().out
+    values, times = _entities(rrd)
+    stamps = {round(k * 5e6) for k in range(401)}  # 200 Hz, ns
+    import rerun as rr
+    for body in model.bodies:
+        entity = "/world/panels/" + rr.escape_entity_path_part(body.name)
+        assert np.allclose(values[entity]["Boxes3D:half_sizes"][0][0], np.asarray(body.size) / 2)
+        assert len(values[entity]["Transform3D:translation"]) == 401
+        assert times[entity] == stamps
+    for name in ("kinetic", "spring", "gravity", "total"):
+        assert times[f"/energy/{name}"] == stamps
+    hinges = [e for e in values if e.startswith("/hinges/")]
+    assert len(hinges) == len(model.hinges) and all(times[e] == stamps for e in hinges)
+    assert len(times["/distance/d"]) > 390
+    texts = values["/events"]["TextLog:text"]
+    assert texts and "r1c2+r1c3" in texts[0][0] and "r2c2+r2c3" in texts[0][0]
+    assert times["/events"] == {round(0.42e9)}  # the sample that reveals the first collision
+
+
+def test_png_strip(recording, tmp_path, capsys):
+    from PIL import Image
+
+    png = tmp_path / "strip.png"
+    assert main(["replay", str(recording), "--png", str(png), "--at", "0,0.1,0.2,0.3,0.4"]) == 0
+    assert "5 frames" in capsys.readouterr().out
+    with Image.open(png) as image:
+        width, height = image.size
+        assert width > 4 * height  # five frames side by side
+        pixels = np.asarray(image.convert("RGB"))
+    assert (pixels.std(axis=(0, 1)) > 5).all()  # something was drawn
+
+
+def test_png_instant_outside_the_recording(recording, tmp_path, capsys):
+    assert main(["replay", str(recording), "--png", str(tmp_path / "x.png"), "--at", "0,7"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("panel-deploy: error: --at: 7 s is outside the recording") and "\n" not in err
+
+
+def _listening(port):
+    """Local addresses with a TCP socket listening on ``port`` (from /proc/net/tcp{,6})."""
+    found = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            lines = open(table).read().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            local, state = line.split()[1], line.split()[3]
+            address, hex_port = local.split(":")
+            if state == "0A" and int(hex_port, 16) == port:
+                found.append(address)
+    return found
+
+
+def test_serve_binds_loopback_only_and_stops_on_sigint(recording):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen([sys.executable, "-m", "panel_deploy.cli", "replay", str(recording),
+                             "--serve", "--port", str(port)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert f"rerun+http://127.0.0.1:{port}/proxy" in line, line + proc.stderr.read()
+        deadline = time.monotonic() + 10
+        while not _listening(port) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert _listening(port) == ["0100007F"]  # 127.0.0.1 and nothing else
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait()

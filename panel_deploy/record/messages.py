@@ -11,6 +11,7 @@ ROS 2 Jazzy type store (``tf2_msgs`` included, which is not pip-installable);
 from __future__ import annotations
 
 import math
+import struct
 
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
@@ -57,8 +58,27 @@ def serialize(message) -> bytes:
 
 
 def deserialize(data, typename: str):
-    """The rosbags message of CDR bytes ``data`` of type ``typename``."""
-    return TYPESTORE.deserialize_cdr(data, typename)
+    """The rosbags message of CDR bytes ``data`` of type ``typename``.
+
+    Bytes after the end of the message are ignored: rclpy's serializer
+    (which ``ros2 bag record`` stores) leaves stray padding after some
+    messages, e.g. a JointState with an empty float64 array, which the
+    strict ``deserialize_cdr`` rejects as a size mismatch.
+
+    Raises
+    ------
+    ValueError
+        Not CDR, or the bytes end before the message does.
+    """
+    data = memoryview(data)
+    if len(data) < 4 or bytes(data[:2]) not in (b"\x00\x00", b"\x00\x01"):
+        raise ValueError("not CDR (no CDR encapsulation header)")
+    msgdef = TYPESTORE.get_msgdef(typename)
+    decode = msgdef.deserialize_cdr_le if data[1] else msgdef.deserialize_cdr_be
+    try:
+        return decode(data[4:], 0, msgdef.cls, TYPESTORE)[0]
+    except (struct.error, UnicodeDecodeError, ValueError, IndexError) as e:
+        raise ValueError(f"not a {typename} ({e})") from None
 
 
 def msgdef(typename: str) -> str:

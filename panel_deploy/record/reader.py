@@ -103,9 +103,8 @@ class Recording:
         for i, (log_time, data) in enumerate(self._raw.get(topic, ())):
             try:
                 out.append((log_time, messages.deserialize(data, actual)))
-            except Exception as e:  # rosbags raises several kinds on bad bytes
-                raise TrajectoryError(f"{self.path}: {topic} message {i} does not decode as "
-                                      f"{actual} ({e})") from None
+            except ValueError as e:
+                raise TrajectoryError(f"{self.path}: {topic} message {i} does not decode ({e})") from None
         return out
 
     def scene(self):

@@ -1,0 +1,144 @@
+"""Recordings that are not ours or not whole: clear one-line errors (exit 2), or a note and what there is.
+
+Also ``collide`` on a real array's recording: encoder joint states as
+``ros2 bag record`` stores them (rclpy's serializer, rosbag2's MCAP layout
+written by rosbags), without velocities, stamped with wall-clock time.
+"""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from panel_deploy.cli import main
+from panel_deploy.record import messages as m
+from panel_deploy.record.writer import Recorder
+from panel_deploy.run import simulate_scene
+from panel_deploy.scene import load_scene, resolve_scene
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    path = tmp_path_factory.mktemp("errors") / "paper.mcap"
+    assert main(["simulate", "paper_4x4", "--t-end", "0.6", "--record", str(path)]) == 0
+    return path
+
+
+def _one_line_error(capsys, path, *words):
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"panel-deploy: error: {path}: ") and "\n" not in err, err
+    for w in words:
+        assert w in err, err
+    return err
+
+
+@pytest.mark.parametrize("command", [["collide"], ["replay", "--save", "x.rrd"]])
+def test_empty_file(tmp_path, capsys, command):
+    path = tmp_path / "empty.mcap"
+    path.write_bytes(b"")
+    assert main([command[0], str(path), *command[1:]]) == 2
+    _one_line_error(capsys, path, "empty file")
+
+
+def test_not_mcap(tmp_path, capsys):
+    path = tmp_path / "notes.mcap"
+    path.write_text("a text file\n")
+    assert main(["collide", str(path)]) == 2
+    _one_line_error(capsys, path, "not an MCAP file")
+
+
+def test_missing_file(tmp_path, capsys):
+    path = tmp_path / "nowhere.mcap"
+    assert main(["collide", str(path)]) == 2
+    _one_line_error(capsys, path, "cannot read")
+
+
+def test_corrupt_chunk(recording, tmp_path, capsys):
+    data = bytearray(recording.read_bytes())
+    data[len(data) // 2: len(data) // 2 + 64] = bytes(64)  # zeros in the middle of a chunk
+    path = tmp_path / "corrupt.mcap"
+    path.write_bytes(bytes(data))
+    assert main(["collide", str(path)]) == 2
+    _one_line_error(capsys, path, "corrupt")
+
+
+def test_truncated_file_is_read_up_to_its_end_and_says_so(recording, tmp_path, capsys):
+    path = tmp_path / "cut.mcap"
+    path.write_bytes(recording.read_bytes()[:len(recording.read_bytes()) * 2 // 3])
+    assert main(["collide", str(path)]) == 0
+    out = capsys.readouterr()
+    assert "is truncated" in out.err and "read up to t = " in out.err
+    assert "samples up to t = " in out.out or "first collision" in out.out
+    assert main(["replay", str(path), "--save", str(tmp_path / "cut.rrd")]) == 0
+    assert "is truncated" in capsys.readouterr().err
+
+
+def test_mcap_without_our_topics(tmp_path, capsys):
+    path = tmp_path / "chatter.mcap"
+    with Recorder(path) as rec:
+        rec.write("/chatter", m.STRING, m.string("hello"), 0)
+    assert main(["collide", str(path), "--scene", "paper_4x4"]) == 2
+    _one_line_error(capsys, path, "no /joint_states", "/chatter")
+
+
+def test_joint_states_without_a_scene(tmp_path, capsys):
+    path = tmp_path / "bare.mcap"
+    with Recorder(path) as rec:
+        rec.write("/joint_states", m.JOINT_STATE, m.joint_state(["a"], 0.0, [0.0], [0.0], [0.0]), 0)
+    assert main(["collide", str(path)]) == 2
+    _one_line_error(capsys, path, "no /panel_deploy/model", "--scene")
+
+
+def test_joint_names_that_are_not_the_scenes_hinges(tmp_path, capsys):
+    path = tmp_path / "other_robot.mcap"
+    with Recorder(path) as rec:
+        for j in range(3):
+            rec.write("/joint_states", m.JOINT_STATE,
+                      m.joint_state(["shoulder", "elbow"], j * 0.01, [0.1, 0.2], [0, 0], [0, 0]), j)
+    assert main(["collide", str(path), "--scene", "paper_4x4"]) == 2
+    _one_line_error(capsys, path, "not the hinges of scene paper_4x4", "'shoulder'")
+
+
+def test_topic_of_another_type(tmp_path, capsys):
+    path = tmp_path / "strings.mcap"
+    with Recorder(path) as rec:
+        rec.write("/joint_states", m.STRING, m.string("r1c1-r1c2: 0.3"), 0)
+    assert main(["collide", str(path), "--scene", "paper_4x4"]) == 2
+    _one_line_error(capsys, path, "/joint_states is std_msgs/msg/String")
+
+
+def test_optimise_record_needs_out(capsys):
+    assert main(["optimise", "paper_4x4", "--record", "x.mcap"]) == 2
+    assert "--record: needs --out" in capsys.readouterr().err
+
+
+def test_collide_on_an_encoder_recording_from_ros2_bag_record(tmp_path, capsys):
+    """Encoders: tree hinges only, in another order, positions only, epoch stamps; bytes
+    from rclpy's serializer (stray padding included) in a rosbag2 MCAP written by rosbags."""
+    pytest.importorskip("rclpy")
+    from rclpy.serialization import serialize_message
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from sensor_msgs.msg import JointState
+
+    scene = load_scene(resolve_scene("paper_4x4"))
+    scene = scene.replace(simulation=replace(scene.simulation, t_end=0.6, samples=121))
+    model, result, report = simulate_scene(scene)
+    names = [model.hinges[h].name for h in model.joints][::-1]
+    theta = result.theta[:, ::-1]
+    epoch = 1_763_900_000.0
+    bag = tmp_path / "encoders"
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/joint_states", m.JOINT_STATE, typestore=m.TYPESTORE)
+        for t, angles in zip(result.t, theta):
+            msg = JointState(name=names, position=[float(a) for a in angles])
+            ns = round((epoch + t) * 1e9)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = ns // 10**9, ns % 10**9
+            writer.write(conn, ns, serialize_message(msg))
+    (mcap_file,) = bag.glob("*.mcap")
+    assert main(["collide", str(mcap_file), "--scene", "paper_4x4", "--json"]) == 0
+    import json
+    captured = capsys.readouterr()
+    got = json.loads(captured.out)
+    assert "counted from the first /joint_states stamp" in captured.err
+    assert got["first_collision"]["pair"] == list(report.first_collision.names)
+    assert abs(got["first_collision"]["t"] - report.first_collision.t) <= 0.005 + 1e-6

@@ -14,6 +14,7 @@ end, the outcome on ``/diagnostics`` and as the ``outcome`` metadata record.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import yaml
@@ -58,6 +59,14 @@ def recorded_scene_text(scene, model) -> str:
     return yaml.safe_dump(data, sort_keys=False)
 
 
+def _relative(source) -> str:
+    """A scene file relative to the working directory when it lies below it."""
+    if not source:
+        return ""
+    path = Path(source).resolve()
+    return str(path.relative_to(Path.cwd())) if path.is_relative_to(Path.cwd()) else str(source)
+
+
 def _model_record(model) -> dict:
     c = model.closure
     return {"hinges": [h.name for h in model.hinges],
@@ -90,7 +99,7 @@ def outcome_record(summary: dict, report) -> dict:
             "wall_time": summary["wall_time"]}
 
 
-def record_deployment(path, scene, model, *, command: str | None = None):
+def record_deployment(path, scene, model):
     """Simulate ``model`` as ``scene.simulation`` asks, check it for collisions
     and record it all to ``path`` while it is computed.
 
@@ -101,11 +110,13 @@ def record_deployment(path, scene, model, *, command: str | None = None):
     sim = scene.simulation
     scene_text = recorded_scene_text(scene, model)
     with Recorder(path) as rec:
-        rec.metadata("scene", {"name": scene.name or "", "source": str(scene.source or ""),
+        rec.metadata("scene", {"name": scene.name or "", "source": _relative(scene.source),
                                "yaml": scene_text})
         rec.metadata("model", _model_record(model))
         rec.metadata("integrator", _integrator_record(scene))
-        rec.metadata("run", run_metadata(command))
+        rec.metadata("run", run_metadata())
+        for topic, (typename, _) in m.TOPICS.items():  # every topic, even one left empty
+            rec.channel(topic, typename)
         rec.write("/robot_description", m.STRING, m.string(model_urdf(model)), 0)
         rec.write("/panel_deploy/model", m.STRING, m.string(scene_text), 0)
         rec.write("/tf_static", m.TF_MESSAGE, m.tf_static(model), 0)
@@ -137,7 +148,7 @@ def record_deployment(path, scene, model, *, command: str | None = None):
     return result, report
 
 
-def record_optimum(path, scene, result_file, *, command: str | None = None):
+def record_optimum(path, scene, result_file):
     """``optimise --record``: record the deployment of the K and c written to
     ``result_file`` (the result of ``optimise --out``) with the scene's simulation settings."""
     from ..build import build_model
@@ -145,4 +156,4 @@ def record_optimum(path, scene, result_file, *, command: str | None = None):
 
     model = build_model(scene)
     k, c = load_hinges(result_file, model)
-    return record_deployment(path, scene, model.with_stiffness(k, c), command=command)
+    return record_deployment(path, scene, model.with_stiffness(k, c))

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import shlex
 import sys
 from importlib.metadata import version
 from pathlib import Path
@@ -200,11 +201,10 @@ class Recorder:
         self.close()
 
 
-def run_metadata(command: str | None = None) -> dict:
+def run_metadata() -> dict:
     """The ``run`` metadata record: package and library versions, wall-clock
-    start (UTC, ISO 8601), Python and the command line."""
+    start (UTC, ISO 8601), Python and the process's command-line arguments."""
     return {"package": "panel_deploy", "version": __version__,
             "wall_time": datetime.datetime.now(datetime.timezone.utc).isoformat(),
             "python": sys.version.split()[0], "mcap": version("mcap"),
-            "rosbags": version("rosbags"),
-            "command": command if command is not None else " ".join(sys.argv)}
+            "rosbags": version("rosbags"), "arguments": shlex.join(sys.argv[1:])}

@@ -22,6 +22,7 @@ import yaml
 from .build import build_model
 from .dynamics import simulate_segments
 from .dynamics.report import hinge_states
+from .dynamics.pack import pack
 from .dynamics.result import SimulationResult, concatenate
 from .collision import CollisionSettings
 from .collision.check import TrajectoryCheck
@@ -221,10 +222,11 @@ class Deployment:
 
     def __iter__(self):
         segments = simulate_segments(self.model, self.settings, segment_samples=self.block)
+        packed = pack(self.model)
         try:
             for block in segments:
                 self.blocks.append(block)
-                names, theta, omega, torque = hinge_states(self.model, block)
+                names, theta, omega, torque = hinge_states(self.model, block, packed)
                 self.names = names
                 for j in range(len(block.t)):
                     yield Sample(float(block.t[j]), theta[j], omega[j], torque[j],

@@ -85,6 +85,10 @@ def test_deploy_streams_the_core_trajectory(graph):
     box = panels[-1].markers[0]
     assert box.header.frame_id == "world" and len(panels[-1].markers) == model.n_bodies
     assert (box.scale.x, box.scale.y, box.scale.z) == tuple(model.bodies[0].size)
+    assert messages.seconds(box.header.stamp) == pytest.approx(T_END, abs=1e-9)  # the last sample
+    centres = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z]
+                        for m in panels[-1].markers])
+    assert np.abs(centres - reference.position[-1]).max() <= 1e-9
     status = [s for d in diagnostics for s in d.status if s.name == "panel_deploy/dynamics"][-1]
     values = {kv.key: kv.value for kv in status.values}
     assert values["success"] == "True" and float(values["energy_balance_error"]) < 0.05

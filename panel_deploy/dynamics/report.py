@@ -30,7 +30,7 @@ def hinge_angles(model: Model, result: SimulationResult):
     return [model.hinges[h].name for h in idx], idx, theta
 
 
-def hinge_states(model: Model, result: SimulationResult):
+def hinge_states(model: Model, result: SimulationResult, packed=None):
     """Angle, rate and torque of every hinge at every sample, as a joint-state stream carries them.
 
     Hinges are in :func:`hinge_angles` order (tree coordinates, then cut
@@ -39,6 +39,9 @@ def hinge_states(model: Model, result: SimulationResult):
     the loop open by micrometres). The torque is the hinge's own law,
     Eq. (2)-(4): springs, dampers and joint-limit contact, N m, acting on
     ``body_b``.
+
+    ``packed``, :func:`~.pack.pack` of the model, saves packing it again
+    (for a stream of blocks).
 
     Returns
     -------
@@ -51,7 +54,7 @@ def hinge_states(model: Model, result: SimulationResult):
     omega = np.empty((s, len(idx)))
     omega[:, :model.n_coords] = result.omega
     if model.cut_hinges:
-        P = pack(model)
+        P = pack(model) if packed is None else packed
         for j in range(s):
             omega[j, model.n_coords:] = cut_rates(P, result.rotation[j, P.body],
                                                   result.angular_velocity[j, P.body])

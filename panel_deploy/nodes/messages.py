@@ -130,6 +130,22 @@ def panel_markers(model, rotation, position, t) -> MarkerArray:
                                 for b in range(model.n_bodies)])
 
 
+def move_markers(markers: MarkerArray, rotation, position, t) -> MarkerArray:
+    """``markers`` of :func:`panel_markers`, moved in place to new poses at ``t``.
+
+    Filling a message costs far more than changing it (rclpy checks every
+    field on construction): a stream moves one array instead.
+    """
+    quaternions = Rotation.from_matrix(rotation).as_quat()
+    time = stamp(t)
+    for m, q, p in zip(markers.markers, quaternions.tolist(), position.tolist()):
+        m.header.stamp = time
+        o, x = m.pose.orientation, m.pose.position
+        o.x, o.y, o.z, o.w = q
+        x.x, x.y, x.z = p
+    return markers
+
+
 def collision_markers(model, event, rotation, position) -> MarkerArray:
     """The colliding pair in red at the instant of the event, and the contact point."""
     boxes = [_box(model, b, rotation, position, event.t, "collision", HIT_COLOUR)

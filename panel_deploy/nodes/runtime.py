@@ -16,7 +16,7 @@ import threading
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import Trigger
@@ -81,8 +81,13 @@ def validator(node, check):
 
 
 def spin(nodes, stop: threading.Event) -> None:
-    """Run ``nodes`` on one multi-threaded executor until ``stop`` is set."""
-    executor = MultiThreadedExecutor()
+    """Run ``nodes`` on one executor until ``stop`` is set.
+
+    Single-threaded: no callback waits on another (long work and service
+    calls run in the nodes' own worker threads), and a thread pool doubled
+    the collision monitor's time per message.
+    """
+    executor = SingleThreadedExecutor()
     for node in nodes:
         executor.add_node(node)
     try:

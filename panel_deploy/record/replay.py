@@ -13,7 +13,8 @@ frame per joint state):
 - ``energy/<kind>``: kinetic, spring (hinge springs, joint-limit contact
   and closure penalty springs) and gravity energy and their sum (J), from the
   model at the recorded angles and rates (kinetic and the sum need rates).
-- ``distance/d``: the smallest distance between panels that share no hinge (m).
+- ``distance/d``: the smallest distance between panels that share no hinge
+  (m), up to the first collision.
 - ``events``: one text line per first-collision event, at its sample.
 
 The blueprint opens on the 3D view beside the plots and the event log.
@@ -66,16 +67,18 @@ def energies(d: RecordedDeployment) -> dict:
 
 
 def collision_events(d: RecordedDeployment):
-    """``(distance, events)``: the smallest distance (m) at every sample, and
-    the first collision's events (every pair colliding at the sample that
-    reveals it, as ``collide`` reports; the motion after it is not physical)."""
+    """``(distance, events)``: the smallest distance (m) at every sample up to
+    the first collision (nan after it: the motion is no longer physical), and
+    that collision's events (every pair colliding at the sample that reveals
+    it), as ``collide`` finds them."""
     from ..collision import CollisionSettings
     from ..collision.check import TrajectoryCheck
 
     check = TrajectoryCheck(d.model, CollisionSettings.from_scene(d.scene), capacity=len(d.track.t))
-    distance = np.empty(len(d.track.t))
+    distance = np.full(len(d.track.t), np.nan)
     for j, t in enumerate(d.track.t):
-        check.update(t, d.track.theta[j], d.track.omega[j])
+        if check.update(t, d.track.theta[j], d.track.omega[j]):
+            break
         distance[j] = check.monitor.min_distance
     return distance, check.first_events
 

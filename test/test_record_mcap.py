@@ -250,3 +250,21 @@ def test_collide_on_the_recording_reports_the_simulated_collision(recorded, caps
     assert got["first_collision"]["pair"] == list(report.first_collision.names)
     assert math.isclose(got["v"], report.v, rel_tol=1e-12)
     assert math.isclose(got["d"], report.d, rel_tol=1e-12)
+
+
+def test_optimise_record_deploys_the_result_file(tmp_path):
+    """``optimise --record`` records the deployment of the K and c it wrote to --out."""
+    out, mcap = tmp_path / "k.yaml", tmp_path / "best.mcap"
+    code = main(["optimise", "paper_4x4", "--max-evaluations", "4", "--workers", "1", "--quiet",
+                 "--out", str(out), "--record", str(mcap)])
+    assert code in (0, 1)
+    hinges = yaml.safe_load(out.read_text())["hinges"]
+    from panel_deploy.record import open_recording
+    recording = open_recording(mcap)
+    model = json.loads(recording.metadata["model"]["stiffness"]), \
+        json.loads(recording.metadata["model"]["damping"])
+    names = json.loads(recording.metadata["model"]["hinges"])
+    assert model == ([hinges[n]["k"] for n in names], [hinges[n]["c"] for n in names])
+    rebuilt = build_model(recording.scene())
+    assert [h.k for h in rebuilt.hinges] == model[0]
+    assert recording.count("/joint_states") == 401

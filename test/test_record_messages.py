@@ -158,3 +158,27 @@ def test_rclpy_deserializes_what_we_encode(model, names):
     diag = deserialize_message(m.serialize(m.diagnostics(1.5, m.status("n", m.ERROR, "msg", {"k": 2.0}))),
                                DiagnosticArray)
     assert diag.status[0].level == b"\x02" and diag.status[0].values[0].value == "2.0"
+
+
+def test_rclpy_bytes_with_stray_padding_decode_and_trim():
+    """rclpy's bytes for a JointState with empty float64 arrays end in stray padding,
+    which rosbags' strict decoder rejects; ours ignores it and ``trim`` cuts it off."""
+    pytest.importorskip("rclpy")
+    from rclpy.serialization import serialize_message
+    from rosbags.serde import SerdeError
+    from sensor_msgs.msg import JointState
+
+    msg = JointState(name=["r1c1-r1c2", "r1c1-r2c1"], position=[0.5, 1.5])
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 3, 250
+    data = serialize_message(msg)
+    with pytest.raises(SerdeError):
+        m.TYPESTORE.deserialize_cdr(data, m.JOINT_STATE)
+    ours = m.deserialize(data, m.JOINT_STATE)
+    trimmed = m.trim(data, m.JOINT_STATE)
+    strict = m.TYPESTORE.deserialize_cdr(trimmed, m.JOINT_STATE)
+    for decoded in (ours, strict):
+        assert decoded.name == msg.name and list(decoded.position) == [0.5, 1.5]
+        assert len(decoded.velocity) == len(decoded.effort) == 0
+        assert m.seconds(decoded.header.stamp) == 3 + 250e-9
+    with pytest.raises(ValueError, match="not CDR"):
+        m.deserialize(b"text", m.JOINT_STATE)

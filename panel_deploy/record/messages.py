@@ -57,28 +57,42 @@ def serialize(message) -> bytes:
     return bytes(TYPESTORE.serialize_cdr(message, message.__msgtype__, little_endian=True))
 
 
-def deserialize(data, typename: str):
-    """The rosbags message of CDR bytes ``data`` of type ``typename``.
-
-    Bytes after the end of the message are ignored: rclpy's serializer
-    (which ``ros2 bag record`` stores) leaves stray padding after some
-    messages, e.g. a JointState with an empty float64 array, which the
-    strict ``deserialize_cdr`` rejects as a size mismatch.
-
-    Raises
-    ------
-    ValueError
-        Not CDR, or the bytes end before the message does.
-    """
+def _decode(data, typename: str):
+    """``(message, end)``: the rosbags message in CDR bytes ``data`` and the
+    byte offset where it ends (encapsulation header included)."""
     data = memoryview(data)
     if len(data) < 4 or bytes(data[:2]) not in (b"\x00\x00", b"\x00\x01"):
         raise ValueError("not CDR (no CDR encapsulation header)")
     msgdef = TYPESTORE.get_msgdef(typename)
     decode = msgdef.deserialize_cdr_le if data[1] else msgdef.deserialize_cdr_be
     try:
-        return decode(data[4:], 0, msgdef.cls, TYPESTORE)[0]
+        message, end = decode(data[4:], 0, msgdef.cls, TYPESTORE)
     except (struct.error, UnicodeDecodeError, ValueError, IndexError) as e:
         raise ValueError(f"not a {typename} ({e})") from None
+    return message, 4 + end
+
+
+def deserialize(data, typename: str):
+    """The rosbags message of CDR bytes ``data`` of type ``typename``.
+
+    Bytes after the end of the message are ignored: rclpy's serializer
+    (whose bytes ``ros2 bag record`` stores) leaves stray padding after some
+    messages, e.g. a JointState with an empty float64 array, which the
+    strict ``deserialize_cdr`` of rosbags rejects as a size mismatch.
+
+    Raises
+    ------
+    ValueError
+        Not CDR, or the bytes end before the message does.
+    """
+    return _decode(data, typename)[0]
+
+
+def trim(data, typename: str) -> bytes:
+    """CDR bytes of type ``typename`` without what follows the message (see
+    :func:`deserialize`), so that strict decoders accept them too; for bytes
+    received from rclpy before they are recorded."""
+    return bytes(memoryview(data)[:_decode(data, typename)[1]])
 
 
 def msgdef(typename: str) -> str:

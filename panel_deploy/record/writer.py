@@ -127,8 +127,11 @@ class Recorder:
         topic, typename : str
             e.g. ``"/joint_states"``, ``"sensor_msgs/msg/JointState"``.
         message : rosbags message or bytes
-            A message of the rosbags Jazzy type store, or its CDR bytes as
-            received (e.g. from an rclpy subscription with ``raw=True``).
+            A message of the rosbags Jazzy type store, or its CDR bytes,
+            stored as given. Bytes from rclpy (a subscription with
+            ``raw=True``, ``serialize_message``) may end in stray padding
+            that rosbags' strict decoder rejects: pass them through
+            :func:`.messages.trim` first.
         log_time : int
             ns; simulated time for a deployment.
         """

@@ -7,6 +7,7 @@ the URDF (``world`` is the ground panel's flat frame).
 
 from __future__ import annotations
 
+import array
 import math
 
 import numpy as np
@@ -64,10 +65,15 @@ def joint_state(names, t, theta, omega, torque) -> JointState:
     msg = JointState()
     msg.header.stamp = stamp(t)
     msg.name = list(names)
-    msg.position = [float(x) for x in theta]
-    msg.velocity = [float(x) for x in omega]
-    msg.effort = [float(x) for x in torque]
+    # array.array('d') is taken as it is; a list is checked element by element.
+    msg.position = _doubles(theta)
+    msg.velocity = _doubles(omega)
+    msg.effort = _doubles(torque)
     return msg
+
+
+def _doubles(values) -> array.array:
+    return array.array("d", np.ascontiguousarray(values, dtype=float).tobytes())
 
 
 def read_joint_state(msg: JointState, names, required) -> tuple:

@@ -1,7 +1,6 @@
 """bags/: the sample recordings decode, stay small, and still show what the current code computes."""
 
 import math
-from dataclasses import replace
 from pathlib import Path
 
 import pytest

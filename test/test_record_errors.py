@@ -5,9 +5,9 @@ Also ``collide`` on a real array's recording: encoder joint states as
 written by rosbags), without velocities, stamped with wall-clock time.
 """
 
+import json
 from dataclasses import replace
 
-import numpy as np
 import pytest
 
 from panel_deploy.cli import main
@@ -136,7 +136,6 @@ def test_collide_on_an_encoder_recording_from_ros2_bag_record(tmp_path, capsys):
             writer.write(conn, ns, serialize_message(msg))
     (mcap_file,) = bag.glob("*.mcap")
     assert main(["collide", str(mcap_file), "--scene", "paper_4x4", "--json"]) == 0
-    import json
     captured = capsys.readouterr()
     got = json.loads(captured.out)
     assert "counted from the first /joint_states stamp" in captured.err

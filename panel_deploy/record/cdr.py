@@ -96,17 +96,13 @@ class Layout:
         self.string(frame)
 
     def compile(self) -> "Layout":
+        """Fix the layout: no field can be added after this."""
         self._struct = struct.Struct("".join(self._fmt))
-        self._template = list(self._args)
         return self
-
-    @property
-    def slots(self) -> int:
-        return len(self._slots)
 
     def pack(self, values) -> bytes:
         """The message bytes (encapsulation header included) with ``values`` in the slots, in order."""
-        args = list(self._template)
+        args = list(self._args)
         for i, v in zip(self._slots, values):
             args[i] = v
         return ENCAPSULATION + self._struct.pack(*args)
@@ -176,7 +172,8 @@ class SampleEncoder:
         self._panels = panels.compile()
 
         pairs = [(model.hinges[h].body_a, model.hinges[h].body_b) for h in model.joints]
-        self._a, self._b = (np.array(x, dtype=int) for x in zip(*pairs))
+        self._a = np.array([a for a, _ in pairs], dtype=int)
+        self._b = np.array([b for _, b in pairs], dtype=int)
         # Link frame origin minus centroid, body axes (see panel_deploy.export.urdf.link_poses).
         self._offset = link_origin(model) - np.array([b.flat_position for b in model.bodies])
         tf = Layout()

@@ -1,8 +1,10 @@
 """Recording a deployment as it is computed: ``simulate --record`` and ``optimise --record``.
 
 The samples of :class:`panel_deploy.live.Deployment` go to the file as
-they come, so a recording cut short keeps what was computed up to its last
-closed chunk. Each sample t_j (simulated s, also the MCAP log time) writes
+they come (in batches of :data:`BATCH`), so a recording cut short keeps what
+was computed up to its last closed chunk. First the metadata records
+``scene``, ``model``, ``integrator`` and ``run`` and a channel for every
+topic of :data:`~.messages.TOPICS`. Each sample t_j (simulated s, also the MCAP log time) writes
 ``/clock``, ``/joint_states``, ``/panel_deploy/panels`` and ``/tf``; the
 collision check runs on the same samples as ``panel-deploy simulate`` (the
 paper's D_j, stopping at the first collision) and writes each collision event
@@ -16,7 +18,6 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from ..collision import CollisionSettings
@@ -27,8 +28,6 @@ from . import messages as m
 from .cdr import SampleEncoder
 from .writer import Recorder, run_metadata
 
-#: Names of the metadata records a deployment recording carries.
-METADATA = ("scene", "model", "integrator", "run", "outcome")
 #: Samples encoded together (vectorised poses): 50 ms of simulated time at 200 Hz.
 BATCH = 10
 
@@ -54,7 +53,7 @@ def recorded_scene_text(scene, model) -> str:
     hinges["overrides"] = {h.name: float(h.k) for h in model.hinges}
     ratios = {h.c / h.k for h in model.hinges if h.k > 0}
     if ratios and max(ratios) - min(ratios) <= 1e-12 * max(ratios):
-        hinges["damping_ratio"] = float(np.median(sorted(ratios)))
+        hinges["damping_ratio"] = float(min(ratios))
     data["hinges"] = hinges
     return yaml.safe_dump(data, sort_keys=False)
 
@@ -143,7 +142,7 @@ def record_deployment(path, scene, model):
         t_end = float(result.t[-1])
         rec.write("/diagnostics", m.DIAGNOSTIC_ARRAY, m.diagnostics(
             t_end, m.outcome_status(summary),
-            m.status("panel_deploy/collision_monitor", level, text, values)), m.nanoseconds(t_end))
+            m.status(m.MONITOR_STATUS, level, text, values)), m.nanoseconds(t_end))
         rec.metadata("outcome", outcome_record(summary, report))
     return result, report
 

@@ -5,7 +5,7 @@ times are simulated seconds, frames follow the URDF of
 :func:`panel_deploy.export.urdf.model_urdf` (``world`` is the flat array
 frame; one link per body, named ``Body.name``). Types come from the rosbags
 ROS 2 Jazzy type store (``tf2_msgs`` included, which is not pip-installable);
-:func:`serialize` turns a message into the CDR bytes rclpy would send.
+:func:`serialize` turns a message into its CDR bytes, as ROS 2 sends them.
 """
 
 from __future__ import annotations
@@ -48,7 +48,8 @@ TOPICS = {
 OK, WARN, ERROR = 0, 1, 2
 #: Status names of the node suite's ``dynamics`` and ``collision_monitor``.
 DYNAMICS_STATUS = "panel_deploy/dynamics"
-EVENT_STATUS = "panel_deploy/collision_monitor/event"
+MONITOR_STATUS = "panel_deploy/collision_monitor"
+EVENT_STATUS = MONITOR_STATUS + "/event"
 PANEL_COLOUR = (0.25, 0.45, 0.85, 1.0)
 
 

@@ -23,6 +23,7 @@ The blueprint opens on the 3D view beside the plots and the event log.
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -184,9 +185,19 @@ def replay_command(args) -> int:
         sink = rr.GrpcServerSink(bind_ip="127.0.0.1", port=args.port)
         stream.set_sinks(sink, default_blueprint=blueprint())
     else:
-        stream.spawn(default_blueprint=blueprint())
+        viewer = Path(sys.executable).parent / "rerun"  # the viewer rerun-sdk installs
+        try:
+            rr.spawn(default_blueprint=blueprint(), recording=stream,
+                     executable_path=str(viewer) if viewer.exists() else None)
+        except RuntimeError as e:
+            raise SceneError("--spawn", f"cannot start the rerun viewer ({e}); write a file "
+                                        f"with --save OUT.rrd or serve with --serve") from None
     frames = log_deployment(stream, d)
-    stream.flush()
+    try:
+        stream.flush(timeout_sec=30.0)
+    except RuntimeError as e:  # a viewer that did not start (no display) or went away
+        raise SceneError("--spawn", f"the rerun viewer is not reachable ({e}); write a file "
+                                    f"with --save OUT.rrd or serve with --serve") from None
     target = args.save or ("rerun " + sink.uri if args.serve else "the rerun viewer")
     print(f"{frames} frames of {d.recording.path} -> {target}")
     if args.serve:

@@ -99,7 +99,7 @@ def cmd_run(args):
     scene = _load(args)  # a bad scene is one line here, before any node starts
     return load("graph").run_graph(scene, optimise=args.optimise,
                                    real_time_factor=args.real_time_factor, rate_hz=args.rate,
-                                   as_json=args.json)
+                                   as_json=args.json, record=args.record)
 
 
 def _stiffness_list(text):
@@ -156,6 +156,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--real-time-factor", type=float, default=1.0,
                    help="simulated seconds per wall second (0: as fast as computed)")
     s.add_argument("--rate", type=float, default=200.0, help="joint states per simulated second")
+    s.add_argument("--record", metavar="FILE.mcap",
+                   help="record the graph's topics (and /tf) to MCAP, as ros2 bag record would")
     s.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     _add_set(s)
     s.set_defaults(func=cmd_run)

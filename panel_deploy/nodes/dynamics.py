@@ -51,7 +51,7 @@ class DynamicsNode(Node):
         runtime.validator(self, self._check)
         self.joint_states = self.create_publisher(JointState, "/joint_states", messages.STREAM)
         self.panels = self.create_publisher(MarkerArray, "/panel_deploy/panels", messages.EVENTS)
-        self.clock = self.create_publisher(Clock, "/clock", messages.EVENTS)
+        self.clock = self.create_publisher(Clock, "/clock", messages.STREAM)
         self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", messages.EVENTS)
         self.create_subscription(String, "/panel_deploy/model", self._on_model, messages.LATCHED)
         runtime.trigger_service(self, "~/deploy", self._deploy)

@@ -21,12 +21,14 @@ from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
 
 from ..live import scene_yaml
+from ..record.deployment import outcome_record
 from ..summary import deployment_summary, summary_text
 from . import messages, runtime
 from .array_model import ArrayModelNode
 from .collision_monitor import CollisionMonitorNode
 from .dynamics import DynamicsNode
 from .optimiser import OptimiserNode
+from .recorder import RecorderNode
 
 #: Seconds to wait for a service or for the model to reach every node.
 TIMEOUT = 30.0
@@ -35,9 +37,9 @@ TIMEOUT = 30.0
 class Driver(Node):
     """The client side of ``run``: calls the services, shows progress on stderr."""
 
-    def __init__(self, graph, stop):
+    def __init__(self, graph, stop, recorder=None):
         super().__init__("panel_deploy_run")
-        self.graph, self.stop = graph, stop
+        self.graph, self.stop, self.recorder = graph, stop, recorder
         self.group = ReentrantCallbackGroup()
         self.create_subscription(DiagnosticArray, "/panel_deploy/collision_events",
                                  self._on_events, messages.EVENTS, callback_group=self.group)
@@ -100,6 +102,12 @@ class Driver(Node):
         self._wait(lambda: monitor.stream.check is not None
                    and monitor.stream.check.checked >= published, "the collision monitor")
         self.summarise()
+        if self.recorder is not None:
+            got = self.recorder.received
+            self._wait(lambda: got["/joint_states"] >= published and got["/diagnostics"] >= 1,
+                       "the recorder")
+            time.sleep(0.2)  # the monitor's last events and verdict, published just now
+            self.recorder.close(outcome_record(self.summary, monitor.stream.check.report()))
 
     def summarise(self) -> None:
         """The summary of what the deployment and the monitor have computed so far."""
@@ -134,9 +142,12 @@ class Driver(Node):
 
 
 def run_graph(scene, *, optimise: bool = False, real_time_factor: float = 1.0,
-              rate_hz: float = 200.0, as_json: bool = False) -> int:
+              rate_hz: float = 200.0, as_json: bool = False, record=None) -> int:
     """Start the graph on ``scene`` (a validated Scene, overrides included),
     optimise (optionally), deploy, print the summary; return the exit code.
+
+    With ``record`` (a path), the graph's topics go to that MCAP file
+    (:mod:`.recorder`).
 
     0 when the deployment reaches flat without a collision before it, 1
     otherwise, 130 when interrupted (the summary of what was computed is
@@ -146,18 +157,19 @@ def run_graph(scene, *, optimise: bool = False, real_time_factor: float = 1.0,
         # The array_model node reads a scene file: this one has the overrides applied.
         path = Path(folder) / f"{scene.name or 'scene'}.yaml"
         path.write_text(scene_yaml(scene))
-        return _run(str(path), optimise, real_time_factor, rate_hz, as_json)
+        return _run(str(path), optimise, real_time_factor, rate_hz, as_json, record)
 
 
-def _run(scene_file, optimise, real_time_factor, rate_hz, as_json) -> int:
+def _run(scene_file, optimise, real_time_factor, rate_hz, as_json, record) -> int:
     stop = runtime.start([])
     try:
+        recorder = RecorderNode(record) if record else None
         graph = (ArrayModelNode(parameter_overrides=[Parameter("scene", value=scene_file)]),
                  DynamicsNode(parameter_overrides=[
                      Parameter("real_time_factor", value=float(real_time_factor)),
                      Parameter("rate_hz", value=float(rate_hz))]),
                  CollisionMonitorNode(), OptimiserNode())
-        driver = Driver(graph, stop)
+        driver = Driver(graph, stop, recorder)
         failure = []
 
         def drive():
@@ -174,7 +186,7 @@ def _run(scene_file, optimise, real_time_factor, rate_hz, as_json) -> int:
         interrupted = threading.Event()
         worker = threading.Thread(target=drive, daemon=True)
         worker.start()
-        runtime.spin([*graph, driver], stop)
+        runtime.spin([*graph, driver] + ([recorder] if recorder else []), stop)
         worker.join(timeout=10.0)
     finally:
         rclpy.try_shutdown()

@@ -28,8 +28,8 @@ from ..errors import TrajectoryError
 LATCHED = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
                      reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-#: /joint_states: reliable and deep enough for a whole deployment computed
-#: faster than real time (2 s at 1 kHz), so the monitor sees every sample.
+#: /joint_states and /clock: reliable and deep enough for a whole deployment
+#: computed faster than real time (2 s at 1 kHz), so no subscriber misses a sample.
 STREAM = QoSProfile(depth=5000, history=HistoryPolicy.KEEP_LAST,
                     reliability=ReliabilityPolicy.RELIABLE)
 #: Everything else.

@@ -1,0 +1,103 @@
+"""The recorder of ``panel-deploy run --record``: the live graph's topics to MCAP,
+as ``ros2 bag record`` of them would store them, plus ``/tf``.
+
+Messages are written as received (CDR bytes, rclpy's stray padding
+trimmed), with log time = simulated time: a JointState's stamp, a Clock's
+value, and for everything else the last simulated time seen (0 before the
+deployment starts). The nodes publish no ``/tf`` (tf2_msgs has no wheel);
+the recorder writes it from each JointState and the model, with
+``/tf_static``, as robot_state_publisher would.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from visualization_msgs.msg import MarkerArray
+
+from ..build import build_model
+from ..errors import PanelDeployError
+from ..kinematics import forward_kinematics
+from ..live import scene_from_yaml
+from ..record import messages as recorded
+from ..record.writer import Recorder, run_metadata
+from . import messages
+
+#: Topic -> (rclpy type, QoS) of what the graph publishes and the recorder keeps.
+TOPICS = {
+    "/robot_description": (String, messages.LATCHED),
+    "/panel_deploy/model": (String, messages.LATCHED),
+    "/joint_states": (JointState, messages.STREAM),
+    "/panel_deploy/panels": (MarkerArray, messages.EVENTS),
+    "/diagnostics": (DiagnosticArray, messages.EVENTS),
+    "/panel_deploy/collision_events": (DiagnosticArray, messages.EVENTS),
+    "/clock": (Clock, messages.STREAM),
+}
+
+
+class RecorderNode(Node):
+    def __init__(self, path, **kwargs):
+        super().__init__("panel_deploy_recorder", **kwargs)
+        self.recorder = Recorder(Path(path))
+        self.recorder.metadata("run", run_metadata())
+        for topic, (typename, _) in recorded.TOPICS.items():  # every topic, even one left empty
+            self.recorder.channel(topic, typename)
+        self.model = None
+        self.now = 0  # ns of simulated time
+        self.received = dict.fromkeys(TOPICS, 0)
+        for topic, (msg_type, qos) in TOPICS.items():
+            self.create_subscription(msg_type, topic, self._writer(topic), qos, raw=True)
+
+    def _writer(self, topic):
+        typename = recorded.TOPICS[topic][0]
+
+        def write(data):
+            data = recorded.trim(data, typename)
+            if topic in ("/joint_states", "/clock"):
+                message = recorded.deserialize(data, typename)
+                stamp = message.header.stamp if topic == "/joint_states" else message.clock
+                self.now = stamp.sec * 1_000_000_000 + stamp.nanosec
+                if topic == "/joint_states":
+                    self._tf(message)
+            elif topic == "/panel_deploy/model":
+                self._model(recorded.deserialize(data, typename).data)
+            self.recorder.write(topic, typename, data, self.now)
+            self.received[topic] += 1
+        return write
+
+    def _model(self, text):
+        try:
+            scene = scene_from_yaml(text)
+            self.model = build_model(scene)
+        except PanelDeployError as e:
+            self.get_logger().warning(f"recording without /tf: {e}")
+            return
+        self.recorder.metadata("scene", {"name": scene.name or "", "yaml": text})
+        self.recorder.write("/tf_static", recorded.TF_MESSAGE, recorded.tf_static(self.model),
+                            self.now)
+
+    def _tf(self, joint_state):
+        if self.model is None:
+            return
+        index = {name: i for i, name in enumerate(joint_state.name)}
+        try:
+            theta = [joint_state.position[index[self.model.hinges[h].name]]
+                     for h in self.model.joints]
+        except KeyError:
+            return  # not this model's joint states: recorded, but no /tf for them
+        R, p = forward_kinematics(self.model, theta)
+        self.recorder.write("/tf", recorded.TF_MESSAGE,
+                            recorded.tf_message(self.model, R, p, self.now * 1e-9), self.now)
+
+    def close(self, outcome: dict | None = None):
+        """Write the ``outcome`` metadata record (if given) and the file's summary."""
+        if self.recorder.closed:
+            return
+        if outcome is not None:
+            self.recorder.metadata("outcome", outcome)
+        self.recorder.close()

@@ -1,6 +1,5 @@
 """panel_deploy.live: the ROS-free core of the nodes, checked against the batch core."""
 
-from dataclasses import replace
 
 import numpy as np
 import pytest

@@ -1,6 +1,5 @@
-"""The array_model node as its own process: latched URDF and scene, reload, signals."""
+"""The array_model node as its own process: latched URDF and scene, reload, a bad scene."""
 
-import signal
 import time
 
 import numpy as np
@@ -81,18 +80,6 @@ def test_bad_scene_is_refused_and_the_old_model_stays(node, tmp_path):
     assert not reply.success and "array.rows" in reply.message and "kept the old model" in reply.message
     time.sleep(0.3)
     assert scene_from_yaml(latest(client, "/panel_deploy/model")).name == "mine"
-
-
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_signals_end_the_node_cleanly(sig):
-    proc = NodeProcess("array_model", node_name=f"array_model_{sig.name}")
-    client = Client("array_model_signal")
-    try:
-        wait_for(lambda: client.has_node(f"array_model_{sig.name}"), timeout=60, what="the node")
-    finally:
-        client.close()
-    code, seconds, err = proc.stop(sig)
-    assert code == 0 and seconds < 2.0 and "Traceback" not in err, err
 
 
 def test_bad_scene_at_start_is_one_line_and_exit_2(tmp_path):

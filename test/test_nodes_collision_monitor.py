@@ -2,11 +2,11 @@
 
 import math
 
-import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
+from ros_harness import Client, NodeProcess, wait_for
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
@@ -16,7 +16,6 @@ from panel_deploy.dynamics.report import hinge_states
 from panel_deploy.live import DynamicsParameters, configure
 from panel_deploy.nodes import messages
 from panel_deploy.scene import load_scene, resolve_scene
-from ros_harness import Client, NodeProcess, wait_for
 
 STATUS = "panel_deploy/collision_monitor"
 
@@ -100,7 +99,7 @@ def test_malformed_joint_states_warn_and_the_verdict_stays_right(graph, deployme
     names, theta, omega, torque = hinge_states(model, result)
     n = len(result.t)
     events.clear()
-    feed(publisher, model, result, range(0, n // 2))
+    feed(publisher, model, result, range(n // 2))
     wait_checked(diagnostics, n // 2)
     diagnostics.clear()
     j = n // 2
@@ -126,7 +125,7 @@ def test_reset_starts_a_new_deployment(graph, deployment):
     model, result, report = deployment
     assert client.trigger("/collision_monitor/reset").success
     diagnostics.clear()
-    feed(publisher, model, result, range(0, 20))  # before the collision: OK again
+    feed(publisher, model, result, range(20))  # before the collision: OK again
     wait_checked(diagnostics, 20)
     last = [s for s in statuses(diagnostics) if {kv.key: kv.value for kv in s.values}
             .get("samples") == "20"][-1]

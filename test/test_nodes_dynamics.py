@@ -1,6 +1,5 @@
-"""The dynamics node as its own process: streamed deployment, parameters, services, signals."""
+"""The dynamics node as its own process: streamed deployment, parameters, services."""
 
-import signal
 
 import numpy as np
 import pytest
@@ -134,15 +133,3 @@ def test_stiffness_per_group_is_accepted_and_read_back(graph):
     reply = client.call(GetParameters, "/dynamics/get_parameters",
                         GetParameters.Request(names=["stiffness"]))
     assert list(reply.values[0].double_array_value) == k
-
-
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_signals_end_the_node_cleanly(sig):
-    node = NodeProcess("dynamics", node_name=f"dynamics_{sig.name}")
-    client = Client("signal_test")
-    try:
-        wait_for(lambda: client.has_node(f"dynamics_{sig.name}"), timeout=60, what="the node")
-    finally:
-        client.close()
-    code, seconds, err = node.stop(sig)
-    assert code == 0 and seconds < 2.0 and "Traceback" not in err, err

@@ -10,20 +10,17 @@ time; ``/panel_deploy/panels`` follows at a display rate. The outcome ends on ``
 from __future__ import annotations
 
 import math
-import threading
 import time
 from dataclasses import fields
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from ..errors import PanelDeployError
-from ..live import Deployment, DynamicsParameters, Pacer, configure, scene_from_yaml
+from ..live import Deployment, DynamicsParameters, Pacer, configure
 from ..summary import deployment_summary
 from . import messages, runtime
 
@@ -44,7 +41,7 @@ STATUS = "panel_deploy/dynamics"
 PANEL_RATE = 30.0
 
 
-class DynamicsNode(Node):
+class DynamicsNode(runtime.WorkerNode):
     def __init__(self, **kwargs):
         super().__init__("dynamics", **kwargs)
         runtime.declare(self, PARAMETERS)
@@ -53,13 +50,10 @@ class DynamicsNode(Node):
         self.panels = self.create_publisher(MarkerArray, "/panel_deploy/panels", messages.EVENTS)
         self.clock = self.create_publisher(Clock, "/clock", messages.STREAM)
         self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", messages.EVENTS)
-        self.create_subscription(String, "/panel_deploy/model", self._on_model, messages.LATCHED)
         runtime.trigger_service(self, "~/deploy", self._deploy)
         runtime.trigger_service(self, "~/stop", self._stop)
-        self.scene = None
         self.deployment = None  # the current or last Deployment
         self.summary = None     # deployment_summary of the last finished run
-        self._worker = None
 
     def parameters(self, changes=None) -> DynamicsParameters:
         current = runtime.values(self, PARAMETERS)
@@ -72,22 +66,8 @@ class DynamicsNode(Node):
         if self.scene is not None:  # counts and values the scene must accept
             configure(self.scene, params)
 
-    def _on_model(self, msg):
-        try:
-            self.scene = scene_from_yaml(msg.data)
-        except PanelDeployError as e:
-            self.get_logger().warning(f"ignored a model: {e}")
-
-    @property
-    def running(self) -> bool:
-        return self._worker is not None and self._worker.is_alive()
-
     def _deploy(self, request, response):
-        if self.running:
-            response.success, response.message = False, "a deployment is running; ~/stop it first"
-            return response
-        if self.scene is None:
-            response.success, response.message = False, "no model yet on /panel_deploy/model"
+        if self.busy(response, "a deployment", "~/stop"):
             return response
         try:
             params = self.parameters()
@@ -96,9 +76,7 @@ class DynamicsNode(Node):
             response.success, response.message = False, str(e)
             return response
         self.deployment = Deployment(model, scene.simulation)
-        self._worker = threading.Thread(target=self._run, args=(self.deployment, scene, params),
-                                        daemon=True)
-        self._worker.start()
+        self.start_job(self._run, self.deployment, scene, params)
         response.success = True
         response.message = (f"deploying {scene.name or scene.source} to {scene.simulation.t_end:g} s "
                             f"({scene.simulation.samples} samples)")

@@ -22,6 +22,7 @@ from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..errors import TrajectoryError
+from ..record.messages import PANEL_COLOUR, status_value
 
 #: Latched topics (/robot_description, /panel_deploy/model, results): a late
 #: subscriber still gets the last message.
@@ -38,7 +39,6 @@ EVENTS = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
 
 FRAME = "world"
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
-PANEL_COLOUR = (0.25, 0.45, 0.85, 1.0)
 HIT_COLOUR = (0.95, 0.15, 0.1, 1.0)
 
 
@@ -167,20 +167,13 @@ def collision_markers(model, event, rotation, position) -> MarkerArray:
     return MarkerArray(markers=boxes + [point])
 
 
-def _value(v) -> str:
-    if isinstance(v, float):
-        return "nan" if math.isnan(v) else repr(v)
-    if isinstance(v, (list, tuple)):
-        return ",".join(map(str, v))
-    return str(v)
-
-
 def status(name: str, level: int, message: str, values: dict | None = None,
            hardware_id: str = "panel_array") -> DiagnosticStatus:
     """A DiagnosticStatus; ``level`` OK, WARN, ERROR or 0, 1, 2; ``values``
     become key-values (None as empty string)."""
-    return DiagnosticStatus(level=level if isinstance(level, bytes) else bytes([level]), name=name, message=message, hardware_id=hardware_id,
-                            values=[KeyValue(key=str(k), value="" if v is None else _value(v))
+    return DiagnosticStatus(level=level if isinstance(level, bytes) else bytes([level]),
+                            name=name, message=message, hardware_id=hardware_id,
+                            values=[KeyValue(key=str(k), value="" if v is None else status_value(v))
                                     for k, v in (values or {}).items()])
 
 

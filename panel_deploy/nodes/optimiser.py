@@ -14,13 +14,12 @@ import threading
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.srv import SetParameters
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
 from ..build import build_model
 from ..errors import PanelDeployError
-from ..live import optimisation_scene, scene_from_yaml
+from ..live import optimisation_scene
 from ..optimise import optimise
 from ..optimise.io import dump_result
 from ..optimise.parallel import Cancelled
@@ -39,22 +38,19 @@ PARAMETERS = {
 STATUS = "panel_deploy/optimiser"
 
 
-class OptimiserNode(Node):
+class OptimiserNode(runtime.WorkerNode):
     def __init__(self, **kwargs):
         super().__init__("optimiser", **kwargs)
         runtime.declare(self, PARAMETERS)
         runtime.validator(self, lambda changes: self.scene and self._search_scene(changes))
         self.progress = self.create_publisher(DiagnosticArray, "~/progress", messages.EVENTS)
         self.result_pub = self.create_publisher(String, "~/result", messages.LATCHED)
-        self.create_subscription(String, "/panel_deploy/model", self._on_model, messages.LATCHED)
         runtime.trigger_service(self, "~/optimise", self._optimise)
         runtime.trigger_service(self, "~/cancel", self._cancel)
         self._client_group = MutuallyExclusiveCallbackGroup()
         self._targets = {}  # set_parameters clients by service name
-        self.scene = None
         self.result = None  # the last OptimisationResult
         self._cancel_event = threading.Event()
-        self._worker = None
 
     def _search_scene(self, changes=None):
         p = {**runtime.values(self, PARAMETERS), **(changes or {})}
@@ -62,22 +58,8 @@ class OptimiserNode(Node):
                                   method=p["method"], damping_ratio_bounds=p["damping_ratio_bounds"],
                                   seed=None if p["seed"] < 0 else p["seed"]), p
 
-    def _on_model(self, msg):
-        try:
-            self.scene = scene_from_yaml(msg.data)
-        except PanelDeployError as e:
-            self.get_logger().warning(f"ignored a model: {e}")
-
-    @property
-    def running(self) -> bool:
-        return self._worker is not None and self._worker.is_alive()
-
     def _optimise(self, request, response):
-        if self.running:
-            response.success, response.message = False, "an optimisation is running; ~/cancel it first"
-            return response
-        if self.scene is None:
-            response.success, response.message = False, "no model yet on /panel_deploy/model"
+        if self.busy(response, "an optimisation", "~/cancel"):
             return response
         try:
             scene, p = self._search_scene()
@@ -86,8 +68,7 @@ class OptimiserNode(Node):
             response.success, response.message = False, str(e)
             return response
         self._cancel_event.clear()
-        self._worker = threading.Thread(target=self._run, args=(model, scene, p), daemon=True)
-        self._worker.start()
+        self.start_job(self._run, model, scene, p)
         response.success = True
         response.message = f"optimising {scene.name or scene.source} ({scene.optimisation.method}, " \
                            f"at most {scene.optimisation.max_evaluations} evaluations)"

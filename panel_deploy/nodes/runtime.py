@@ -17,11 +17,15 @@ import rclpy
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from ..errors import PanelDeployError
+from ..live import scene_from_yaml
+from . import messages
 
 #: ROS parameter type of each Python default.
 _TYPES = {bool: Parameter.Type.BOOL, int: Parameter.Type.INTEGER,
@@ -78,6 +82,42 @@ def validator(node, check):
             return SetParametersResult(successful=False, reason=f"{type(e).__name__}: {e}")
         return SetParametersResult(successful=True)
     node.add_on_set_parameters_callback(callback)
+
+
+class WorkerNode(Node):
+    """A node that follows ``/panel_deploy/model`` and runs one long job at a
+    time (a deployment, a search) in a thread of its own, so that its
+    services answer at once."""
+
+    def __init__(self, name, **kwargs):
+        super().__init__(name, **kwargs)
+        self.scene = None  # the last valid scene received
+        self._worker = None
+        self.create_subscription(String, "/panel_deploy/model", self._on_model, messages.LATCHED)
+
+    def _on_model(self, msg):
+        try:
+            self.scene = scene_from_yaml(msg.data)
+        except PanelDeployError as e:
+            self.get_logger().warning(f"ignored a model: {e}")
+
+    @property
+    def running(self) -> bool:
+        return self._worker is not None and self._worker.is_alive()
+
+    def busy(self, response, job: str, stop: str) -> bool:
+        """Refuse in ``response`` (and return True) while ``job`` runs or before a model came."""
+        if self.running:
+            response.success, response.message = False, f"{job} is running; {stop} it first"
+        elif self.scene is None:
+            response.success, response.message = False, "no model yet on /panel_deploy/model"
+        else:
+            return False
+        return True
+
+    def start_job(self, target, *args) -> None:
+        self._worker = threading.Thread(target=target, args=args, daemon=True)
+        self._worker.start()
 
 
 def spin(nodes, stop: threading.Event) -> None:

@@ -234,7 +234,8 @@ def tf_static(model, t: float = 0.0):
                                                  _quaternions(R[g:g + 1])[0], p[g])])
 
 
-def _value(v) -> str:
+def status_value(v) -> str:
+    """A diagnostic key-value's text: floats by ``repr``, sequences comma-separated."""
     if isinstance(v, float):
         return "nan" if math.isnan(v) else repr(v)
     if isinstance(v, (list, tuple)):
@@ -250,7 +251,7 @@ def status(name: str, level: int, message: str, values: dict | None = None,
     return _T["diagnostic_msgs/msg/DiagnosticStatus"](
         level=level, name=name, message=message,
         hardware_id=hardware_id,
-        values=[kv(key=str(k), value="" if v is None else _value(v))
+        values=[kv(key=str(k), value="" if v is None else status_value(v))
                 for k, v in (values or {}).items()])
 
 

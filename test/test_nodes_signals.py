@@ -1,0 +1,26 @@
+"""Every node executable ends on SIGINT and SIGTERM with exit code 0, fast and without a traceback."""
+
+import signal
+
+import pytest
+
+from ros_harness import Client, NodeProcess, wait_for
+
+NODES = ("array_model", "dynamics", "collision_monitor", "optimiser")
+
+
+@pytest.fixture(scope="module")
+def client():
+    c = Client("signal_test")
+    yield c
+    c.close()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("node", NODES)
+def test_signal_ends_the_node_cleanly(client, node, sig):
+    name = f"{node}_{sig.name}"  # a name of its own: not another test's process
+    proc = NodeProcess(node, node_name=name)
+    wait_for(lambda: client.has_node(name), timeout=60, what=f"{node} to start")
+    code, seconds, err = proc.stop(sig)
+    assert code == 0 and seconds < 2.0 and "Traceback" not in err, (code, seconds, err)

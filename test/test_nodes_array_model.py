@@ -18,7 +18,7 @@ from ros_harness import Client, NodeProcess, wait_for
 
 
 @pytest.fixture(scope="module")
-def node():
+def node(compiled_nodes):
     proc = NodeProcess("array_model", "scene:=paper_4x4")
     client = Client("array_model_test")
     # Join late: the node has published before this subscriber exists.

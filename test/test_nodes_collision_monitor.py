@@ -30,7 +30,7 @@ def deployment():
 
 
 @pytest.fixture(scope="module")
-def graph():
+def graph(compiled_nodes):
     model = NodeProcess("array_model", "scene:=paper_4x4")
     monitor = NodeProcess("collision_monitor")
     client = Client("monitor_test")

@@ -21,7 +21,7 @@ T_END, RATE = 0.5, 200.0
 
 
 @pytest.fixture(scope="module")
-def graph():
+def graph(compiled_nodes):
     model = NodeProcess("array_model", "scene:=paper_4x4")
     dynamics = NodeProcess("dynamics", f"t_end:={T_END}", f"rate_hz:={RATE}", "real_time_factor:=0.0")
     client = Client("dynamics_test")

@@ -17,7 +17,7 @@ from panel_deploy.scene import load_scene, resolve_scene
 CLI = str(Path(sys.executable).parent / "panel-deploy")
 
 
-def test_run_paper_scene_matches_simulate():
+def test_run_paper_scene_matches_simulate(compiled_nodes):
     proc = subprocess.run([CLI, "run", "paper_4x4", "--real-time-factor", "0", "--json",
                            "--set", "simulation.t_end=0.6"],
                           capture_output=True, text=True, timeout=300)
@@ -33,7 +33,7 @@ def test_run_paper_scene_matches_simulate():
     assert "t = " in proc.stderr and "collision" in proc.stderr
 
 
-def test_run_optimise_then_deploys_flat_without_collision():
+def test_run_optimise_then_deploys_flat_without_collision(compiled_nodes):
     proc = subprocess.run([CLI, "run", "paper_4x4", "--optimise", "--real-time-factor", "0",
                            "--set", "optimisation.damping_ratio_bounds=[0.043,0.3]",
                            "--set", "optimisation.max_evaluations=12",
@@ -44,7 +44,7 @@ def test_run_optimise_then_deploys_flat_without_collision():
     assert "optimise" in proc.stderr
 
 
-def test_run_interrupted_prints_what_was_computed():
+def test_run_interrupted_prints_what_was_computed(compiled_nodes):
     proc = subprocess.Popen([CLI, "run", "paper_4x4"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120

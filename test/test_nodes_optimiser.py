@@ -15,7 +15,7 @@ LUBRICANT = [0.043, 0.3]
 
 
 @pytest.fixture(scope="module")
-def graph():
+def graph(compiled_nodes):
     procs = [NodeProcess("array_model", "scene:=paper_4x4"), NodeProcess("dynamics"),
              NodeProcess("optimiser", "max_evaluations:=12", "method:=local",
                          f"damping_ratio_bounds:=[{LUBRICANT[0]},{LUBRICANT[1]}]")]

@@ -25,7 +25,7 @@ T_END = 0.6
 
 
 @pytest.fixture(scope="module")
-def recording(tmp_path_factory):
+def recording(tmp_path_factory, compiled_nodes):
     path = tmp_path_factory.mktemp("run") / "run.mcap"
     proc = subprocess.run([CLI, "run", "paper_4x4", "--real-time-factor", "0", "--record", str(path),
                            "--set", f"simulation.t_end={T_END}"],

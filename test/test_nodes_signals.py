@@ -10,7 +10,7 @@ NODES = ("array_model", "dynamics", "collision_monitor", "optimiser")
 
 
 @pytest.fixture(scope="module")
-def client():
+def client(compiled_nodes):
     c = Client("signal_test")
     yield c
     c.close()

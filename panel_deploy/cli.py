@@ -107,8 +107,8 @@ def _stiffness_list(text):
         values = [float(x) for x in text.split(",")]
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}") from None
-    if not values or any(not v > 0 for v in values):
-        raise argparse.ArgumentTypeError(f"expected stiffnesses > 0 N m/rad, got {text!r}")
+    if not values or any(not 0 < v < float("inf") for v in values):
+        raise argparse.ArgumentTypeError(f"expected finite stiffnesses > 0 N m/rad, got {text!r}")
     return values
 
 
@@ -118,8 +118,15 @@ def _add_set(parser):
                              "(e.g. --set gravity=[0,0,0] --set simulation.t_end=3); repeatable")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors as the one line every other error is (no usage block)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="panel-deploy", description=__doc__.splitlines()[0])
+    p = _Parser(prog="panel-deploy", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("schema", help="print the scene schema (keys, types, units, defaults)")
@@ -130,7 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--cols", type=int)
     s.add_argument("--scene", help="work on the design of a scene file")
     s.add_argument("--circuit", type=int, help="only this circuit index")
-    s.add_argument("--limit", type=int, default=50, help="list at most this many circuits")
+    s.add_argument("--limit", type=int, help="list at most this many circuits (default 50)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.add_argument("--plot", metavar="FILE.png", help="draw the design and its stacks")
     _add_set(s)
@@ -183,7 +190,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--springs", type=_stiffness_list,
                    help="available spring stiffnesses, N m/rad, comma-separated")
     s.add_argument("--perturb", type=int, default=0, help="tolerance check: perturbed copies")
-    s.add_argument("--perturb-tol", type=float, default=0.05, help="relative spread of k and c")
+    s.add_argument("--perturb-tol", type=float,
+                   help="relative spread of k and c (default 0.05, with --perturb)")
     s.add_argument("--quiet", action="store_true", help="no progress lines")
     s.add_argument("--json", action="store_true", help="print the result as JSON")
     _add_set(s)
@@ -241,6 +249,8 @@ def main(argv=None) -> int:
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _interrupt)
     try:
+        from .cli_checks import check_args
+        check_args(args)  # every flag and output path, before any work
         return args.func(args) or 0
     except PanelDeployError as e:
         print(f"panel-deploy: error: {e}", file=sys.stderr)

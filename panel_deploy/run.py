@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import copy
 import json
+import math
 import sys
 from dataclasses import replace
 
@@ -12,20 +14,45 @@ from .errors import SceneError
 
 
 def apply_overrides(scene, args):
-    """The scene with the command line's --method, --closure and --t-end applied."""
-    sim, closure = scene.simulation, scene.closure
-    if getattr(args, "method", None):
-        from .scene import INTEGRATORS
-        if args.method not in INTEGRATORS:
-            raise SceneError("--method", f"expected one of {', '.join(INTEGRATORS)}, got {args.method!r}")
-        sim = replace(sim, method=args.method)
-    if getattr(args, "t_end", None) is not None:
-        if not args.t_end > 0:
-            raise SceneError("--t-end", f"expected a number > 0, got {args.t_end}")
-        sim = replace(sim, t_end=args.t_end)
+    """The scene with the command line's --method, --closure and --t-end applied.
+
+    The flags are written into the scene mapping and the scene validated
+    again from it: one source of truth, so the scene a saved trajectory
+    stores is the one the run used, and the flags meet the same limits as
+    the file (a value the schema refuses is named by its flag).
+    """
+    from .scene import INTEGRATORS, scene_from_dict
+    flags = []
+    method = getattr(args, "method", None)
+    if method is not None:
+        if method not in INTEGRATORS:
+            raise SceneError("--method", f"expected one of {', '.join(INTEGRATORS)}, got {method!r}")
+        flags.append(("--method", "simulation", "method", method))
+    t_end = getattr(args, "t_end", None)
+    if t_end is not None:
+        if not 0 < t_end < math.inf:
+            raise SceneError("--t-end", f"expected a finite number > 0, got {t_end}")
+        flags.append(("--t-end", "simulation", "t_end", float(t_end)))
     if getattr(args, "closure", None):
-        closure = replace(closure, method=args.closure)
-    return scene.replace(simulation=sim, closure=closure)
+        flags.append(("--closure", "closure", "method", args.closure))
+    if not flags:
+        return scene
+    if scene.data is None:  # a Scene built in code, not from a mapping
+        sections = {sec: replace(getattr(scene, sec), **{key: v}) for _, sec, key, v in flags}
+        return scene.replace(**sections)
+    data = copy.deepcopy(scene.data)
+    for _, sec, key, value in flags:
+        if not isinstance(data.get(sec), dict):
+            data[sec] = {}
+        data[sec][key] = value
+    try:
+        return scene_from_dict(data, source=scene.source)
+    except SceneError as e:  # the scene was valid without the flags: one of them is to blame
+        named = next((f for f, sec, key, _ in flags if e.path == f"{sec}.{key}"), None)
+        if named:
+            raise SceneError(named, e.reason) from None
+        raise SceneError(", ".join(f for f, *_ in flags), f"{e.path}: {e.reason}" if e.path
+                         else e.reason) from None
 
 
 def scene_model(scene, stiffness_file=None):

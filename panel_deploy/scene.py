@@ -23,6 +23,19 @@ from .errors import SceneError
 
 INTEGRATORS = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA", "compiled")
 
+# --- limits: sanity bounds stated in the schema, so absurd input fails at once ---
+#: Panels along one side: the circuit search, packing check and model are
+#: sized for arrays of this order (a 40 x 40 scene exhausted the recursion limit).
+MAX_SIDE = 12
+_WHY_SIDE = "the circuit search and the model are sized for arrays up to 12 x 12"
+#: Sample instants of one run (memory: about 150 bytes per body per sample).
+MAX_SAMPLES = 50_000
+#: Accepted-step budget of a run (:func:`panel_deploy.dynamics.simulate`'s max_steps).
+STEP_BUDGET = 2_000_000
+_WHY_SCALE = "values this far from a real panel make the model's numbers degenerate"
+_WHY_STIFF = "beyond this the integrator's step collapses long before the end time"
+_WHY_G = "more than 1000 g makes the deployment a crash, not a run"
+
 
 # --- field parsers: each takes (value, path) and returns the parsed value or raises ---
 
@@ -33,7 +46,9 @@ def _type_name(v):
 _YAML12_FLOAT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
 
-def number(low=None, high=None, low_open=False, allow_inf=False):
+def number(low=None, high=None, low_open=False, allow_inf=False, why="", floor=None):
+    """A number parser; ``high`` and ``floor`` (smallest accepted value above
+    ``low``) are sanity limits, ``why`` says why (in the message)."""
     def parse(v, path):
         # PyYAML follows YAML 1.1, which reads 1.0e6 (no exponent sign) as a string.
         if isinstance(v, str) and _YAML12_FLOAT.match(v.strip()):
@@ -44,22 +59,31 @@ def number(low=None, high=None, low_open=False, allow_inf=False):
         if math.isnan(v) or (math.isinf(v) and not allow_inf):
             raise SceneError(path, f"expected a finite number, got {v}")
         if low is not None and (v <= low if low_open else v < low):
-            raise SceneError(path, f"expected a number {'>' if low_open else '>='} {low}, got {v:g}")
+            raise SceneError(path, f"expected a number {'>' if low_open else '>='} {low:g}, got {v:g}")
+        if floor is not None and v < floor:
+            raise SceneError(path, f"expected a number >= {floor:g}, got {v:g}"
+                                   + (f" (limit: {why})" if why else ""))
         if high is not None and v > high:
-            raise SceneError(path, f"expected a number <= {high}, got {v:g}")
+            raise SceneError(path, f"expected a number <= {high:g}, got {v:g}"
+                                   + (f" (limit: {why})" if why else ""))
         return v
-    parse.describe = "number" + (f" {'>' if low_open else '>='} {low}" if low is not None else "")
+    parse.describe = ("number" + (f" {'>' if low_open else '>='} {low}" if low is not None else "")
+                      + (f", <= {high:g}" if high is not None else ""))
     return parse
 
 
-def integer(low=None):
+def integer(low=None, high=None, why=""):
     def parse(v, path):
         if isinstance(v, bool) or not isinstance(v, int):
             raise SceneError(path, f"expected an integer, got {_type_name(v)} {v!r}")
         if low is not None and v < low:
             raise SceneError(path, f"expected an integer >= {low}, got {v}")
+        if high is not None and v > high:
+            raise SceneError(path, f"expected an integer <= {high}, got {v}"
+                                   + (f" (limit: {why})" if why else ""))
         return v
-    parse.describe = "integer" + (f" >= {low}" if low is not None else "")
+    parse.describe = ("integer" + (f" >= {low}" if low is not None else "")
+                      + (f", <= {high}" if high is not None else ""))
     return parse
 
 
@@ -88,6 +112,8 @@ def vector3(v, path):
 
 
 vector3.describe = "[x, y, z]"
+
+_SIZE = number(0, 1e3, low_open=True, floor=1e-6, why=_WHY_SCALE)
 
 
 def cell(v, path):
@@ -141,7 +167,7 @@ def optional(parser):
 def hinge_stiffness_map(v, path):
     if not isinstance(v, dict):
         raise SceneError(path, f"expected a mapping hinge name -> stiffness, got {v!r}")
-    return {str(k): number(0.0)(x, f"{path}.{k}") for k, x in v.items()}
+    return {str(k): number(0.0, 1e4, why=_WHY_STIFF)(x, f"{path}.{k}") for k, x in v.items()}
 
 
 hinge_stiffness_map.describe = "{hinge name: N m/rad}"
@@ -169,14 +195,14 @@ def spec(default, parse, unit="", doc=""):
 
 @dataclass(frozen=True)
 class ArraySection:
-    rows: int = spec(None, integer(1), "", "number of panel rows R")
-    cols: int = spec(None, integer(1), "", "number of panel columns C")
-    length: float = spec(None, number(0, low_open=True), "m", "panel length a, along x (columns)")
-    width: float = spec(None, number(0, low_open=True), "m", "panel width b, along y (rows)")
-    thickness: float = spec(None, number(0, low_open=True), "m", "panel thickness t")
-    mass: float = spec(None, optional(number(0, low_open=True)), "kg",
+    rows: int = spec(None, integer(1, MAX_SIDE, _WHY_SIDE), "", "number of panel rows R")
+    cols: int = spec(None, integer(1, MAX_SIDE, _WHY_SIDE), "", "number of panel columns C")
+    length: float = spec(None, _SIZE, "m", "panel length a, along x (columns)")
+    width: float = spec(None, _SIZE, "m", "panel width b, along y (rows)")
+    thickness: float = spec(None, _SIZE, "m", "panel thickness t")
+    mass: float = spec(None, optional(number(0, 1e6, low_open=True, floor=1e-9, why=_WHY_SCALE)), "kg",
                        "mass of one unit panel (give mass or density)")
-    density: float = spec(None, optional(number(0, low_open=True)), "kg/m^3",
+    density: float = spec(None, optional(number(0, 1e6, low_open=True, floor=1e-6, why=_WHY_SCALE)), "kg/m^3",
                           "panel density (give mass or density)")
 
     @property
@@ -199,16 +225,20 @@ class FoldSection:
 
 @dataclass(frozen=True)
 class HingeSection:
-    stiffness: float = spec(0.1, number(0.0), "N m/rad", "k of every hinge unless overridden")
-    damping_ratio: float = spec(0.043, number(0.0), "s", "c/k (Rayleigh damping: c follows k)")
+    stiffness: float = spec(0.1, number(0.0, 1e4, why=_WHY_STIFF), "N m/rad",
+                            "k of every hinge unless overridden")
+    damping_ratio: float = spec(0.043, number(0.0, 1e3, why=_WHY_STIFF), "s",
+                                "c/k (Rayleigh damping: c follows k)")
     overrides: dict = spec(None, optional(hinge_stiffness_map), "N m/rad", "k of named hinges")
     groups: Any = spec("auto", groups, "", "hinges sharing one stiffness: auto (mirror symmetry), none, or lists")
 
 
 @dataclass(frozen=True)
 class ContactSection:
-    k_s: float = spec(1000.0, number(0, low_open=True), "N m/rad", "joint-limit contact stiffness, Eq. (4)")
-    c_s: float = spec(0.5, number(0.0), "N m s/rad", "joint-limit contact damping, Eq. (4)")
+    k_s: float = spec(1000.0, number(0, 1e9, low_open=True, why=_WHY_STIFF), "N m/rad",
+                      "joint-limit contact stiffness, Eq. (4)")
+    c_s: float = spec(0.5, number(0.0, 1e6, why=_WHY_STIFF), "N m s/rad",
+                      "joint-limit contact damping, Eq. (4)")
 
 
 @dataclass(frozen=True)
@@ -217,22 +247,28 @@ class ClosureSection:
                        "penalty: the paper's Eq. (5) springs; exact: Lagrange multipliers")
     cut_hinge: Any = spec(None, optional(one_of(cell_pairs, describe="a list of cell pairs")), "",
                           "segments of the hinges to cut, one per loop (default: farthest from ground)")
-    k_M: float = spec(1.0e6, number(0, low_open=True), "N/m", "penalty stiffness at M (x, y, z)")
-    c_M: float = spec(280.0, number(0.0), "N s/m", "penalty damping at M")
-    k_N: float = spec(1.0e6, number(0, low_open=True), "N/m", "penalty stiffness at N (2 directions)")
-    c_N: float = spec(280.0, number(0.0), "N s/m", "penalty damping at N")
+    k_M: float = spec(1.0e6, number(0, 1e11, low_open=True, why=_WHY_STIFF), "N/m",
+                      "penalty stiffness at M (x, y, z)")
+    c_M: float = spec(280.0, number(0.0, 1e8, why=_WHY_STIFF), "N s/m", "penalty damping at M")
+    k_N: float = spec(1.0e6, number(0, 1e11, low_open=True, why=_WHY_STIFF), "N/m",
+                      "penalty stiffness at N (2 directions)")
+    c_N: float = spec(280.0, number(0.0, 1e8, why=_WHY_STIFF), "N s/m", "penalty damping at N")
     baumgarte: float = spec(1.0e-3, number(0, low_open=True), "s", "exact: constraint stabilisation time constant")
     regularisation: float = spec(1.0e-10, number(0.0), "", "exact: relative Tikhonov term of the multiplier solve")
 
 
 @dataclass(frozen=True)
 class SimulationSection:
-    t_end: float = spec(1.0, number(0, low_open=True), "s", "end time")
+    t_end: float = spec(1.0, number(0, 600.0, low_open=True, why="arrays deploy in seconds; "
+                                                                  "ten minutes is far beyond"), "s",
+                        "end time")
     method: str = spec("RK23", choice(*INTEGRATORS), "", "integrator (compiled: in-loop compiled RK)")
     rtol: float = spec(1.0e-6, number(0, low_open=True), "", "relative tolerance")
     atol: float = spec(1.0e-8, number(0, low_open=True), "", "absolute tolerance")
     max_step: float = spec(math.inf, number(0, low_open=True, allow_inf=True), "s", "largest step")
-    samples: int = spec(301, integer(3), "", "number s of evenly spaced sample instants t_j")
+    samples: int = spec(301, integer(3, MAX_SAMPLES, "memory: every sample stores the pose and "
+                                                     "velocity of every body"), "",
+                        "number s of evenly spaced sample instants t_j")
     events: bool = spec(True, boolean, "", "locate joint-limit contact switches as solver events")
     flat_tolerance: float = spec(0.05, number(0, low_open=True), "rad",
                                  "the array counts as flat (deployed) at the first sample where "
@@ -380,6 +416,15 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
                              f"the search starts from hinges.damping_ratio = {beta:g} s, which is "
                              f"outside [{lo:g}, {hi:g}]")
     gravity = vector3(data["gravity"], "gravity") if "gravity" in data else Scene.gravity
+    for i, g in enumerate(gravity):
+        if abs(g) > 9810.0:
+            raise SceneError(f"gravity[{i}]", f"expected |g| <= 9810 m/s^2, got {g:g} "
+                                              f"(limit: {_WHY_G})")
+    sim = sections["simulation"]
+    if sim.t_end / sim.max_step > STEP_BUDGET:
+        raise SceneError("simulation.max_step", f"t_end / max_step = {sim.t_end / sim.max_step:.3g} "
+                                                f"steps is above the step budget of {STEP_BUDGET} "
+                                                "(it would run for hours and then fail)")
     for key in ("name", "description"):
         if key in data and not isinstance(data[key], str):
             raise SceneError(key, f"expected a string, got {_type_name(data[key])}")
@@ -424,17 +469,30 @@ def load_scene(path, overrides=()) -> Scene:
         raise SceneError(str(path), "scene file not found") from None
     except (OSError, UnicodeDecodeError) as e:
         raise SceneError(str(path), f"cannot read scene file ({e})") from None
+    from .validate import load_yaml, yaml_problem
     try:
-        data = yaml.safe_load(text)
+        data = load_yaml(text)
     except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(e, "problem", None) or str(e).splitlines()[0]
-        raise SceneError(str(path), f"malformed YAML{where}: {problem}") from None
+        raise SceneError(str(path), f"malformed YAML {yaml_problem(e)}") from None
+    data = apply_overrides(data, overrides)  # its errors name the --set item, not the file
     try:
-        return scene_from_dict(apply_overrides(data, overrides), source=str(path))
+        return scene_from_dict(data, source=str(path))
     except SceneError as e:
+        if _overridden(e.path, overrides):  # a mistake on the command line, not in the file
+            raise SceneError(f"--set {e.path}", e.reason) from None
         raise SceneError(f"{path.name}: {e.path}" if e.path else path.name, e.reason) from None
+
+
+def _overridden(key_path, overrides) -> bool:
+    """Whether ``key_path`` (``simulation.t_end``, ``gravity[0]``) was set by one of ``overrides``."""
+    if not key_path:
+        return False
+    for item in overrides:
+        key = str(item).partition("=")[0].strip()
+        if key_path == key or key_path.startswith((key + ".", key + "[")) \
+                or key.startswith(key_path + "."):
+            return True
+    return False
 
 
 def apply_overrides(data, overrides) -> dict:
@@ -457,11 +515,12 @@ def apply_overrides(data, overrides) -> dict:
         if not sep or not key or any(not part for part in key.split(".")):
             raise SceneError(str(item), "expected an override KEY.PATH=VALUE, "
                                         "e.g. simulation.t_end=3")
+        from .validate import load_yaml, yaml_problem
         try:
-            value = yaml.safe_load(text)
+            value = load_yaml(text)
         except yaml.YAMLError as e:
-            raise SceneError(key, f"override value {text!r} is not valid YAML "
-                                  f"({str(e).splitlines()[0]})") from None
+            raise SceneError(f"--set {key}", f"value {text!r} is not valid YAML "
+                                             f"({yaml_problem(e)})") from None
         *parents, last = key.split(".")
         node = data
         for part in parents:

@@ -14,9 +14,8 @@ N m/rad, as simulated), ``hinge_names``, ``body_names``, ``success``,
 
 from __future__ import annotations
 
-import os
-import tempfile
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -24,14 +23,20 @@ import yaml
 
 from .dynamics.result import SimulationResult
 from .errors import SceneError, TrajectoryError
+from .validate import load_yaml
 
 FORMAT_VERSION = 1
 _ARRAYS = ("t", "theta", "omega", "rotation", "position", "linear_velocity",
            "angular_velocity", "constraint_gap", "closure_sigma_min")
 
 
-def save_trajectory(path, result: SimulationResult, scene, model) -> Path:
-    """Write ``result`` with what is needed to rebuild its model; returns the path."""
+def save_trajectory(path, result: SimulationResult, scene, model, flag: str = "--out") -> Path:
+    """Write ``result`` with what is needed to rebuild its model; returns the path.
+
+    Atomic; if the write fails, the trajectory is saved in a fallback file
+    and the :class:`~panel_deploy.errors.PanelDeployError` (naming ``flag``)
+    says where (:func:`~panel_deploy.validate.write_atomic`).
+    """
     path = Path(path)
     payload = {name: getattr(result, name) for name in _ARRAYS}
     payload.update({f"energy_{k}": v for k, v in result.energy.items()})
@@ -41,15 +46,8 @@ def save_trajectory(path, result: SimulationResult, scene, model) -> Path:
         body_names=np.array([b.name for b in model.bodies]), success=np.array(result.success),
         status=np.array(result.status), message=np.array(result.message),
         method=np.array(result.method), format_version=np.array(FORMAT_VERSION))
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=".npz.part")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, **payload)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
-    return path
+    from .validate import write_atomic
+    return write_atomic(path, lambda f: np.savez_compressed(f, **payload), flag, mode="wb")
 
 
 def load_trajectory(path):
@@ -76,27 +74,90 @@ def load_trajectory(path):
         raise TrajectoryError(f"{path}: trajectory file not found")
     if not zipfile.is_zipfile(path):
         raise TrajectoryError(f"{path}: not a trajectory file (expected an .npz archive)")
+    if path.is_dir():
+        raise TrajectoryError(f"{path}: is a folder, not a trajectory file")
     try:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
-        raise TrajectoryError(f"{path}: not a readable trajectory file ({e})") from None
+    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, KeyError,
+            NotImplementedError, RuntimeError, UnicodeDecodeError) as e:
+        reason = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise TrajectoryError(f"{path}: not a readable trajectory file ({reason})") from None
     missing = [k for k in (*_ARRAYS, "scene_yaml", "stiffness", "format_version") if k not in data]
     if missing:
         raise TrajectoryError(f"{path}: missing arrays {', '.join(missing)}")
-    if int(data["format_version"]) != FORMAT_VERSION:
-        raise TrajectoryError(f"{path}: format_version {int(data['format_version'])}, "
-                              f"expected {FORMAT_VERSION}")
-    s = len(data["t"])
-    for k in _ARRAYS[1:]:
-        if len(data[k]) != s:
-            raise TrajectoryError(f"{path}: {k} has {len(data[k])} samples, t has {s}")
+    version = _scalar(path, data, "format_version", "i")
+    if version != FORMAT_VERSION:
+        raise TrajectoryError(f"{path}: format_version {version}, expected {FORMAT_VERSION}")
+    _check_arrays(path, data)
     try:
-        scene = scene_from_dict(yaml.safe_load(str(data["scene_yaml"])))
+        scene = scene_from_dict(load_yaml(_scalar(path, data, "scene_yaml", "U")))
     except (SceneError, yaml.YAMLError) as e:
         raise TrajectoryError(f"{path}: stored scene is invalid ({e})") from None
     energy = {k[len("energy_"):]: v for k, v in data.items() if k.startswith("energy_")}
     result = SimulationResult(**{k: data[k] for k in _ARRAYS}, energy=energy,
-                              success=bool(data["success"]), status=int(data["status"]),
-                              message=str(data["message"]), method=str(data["method"]))
+                              success=bool(_scalar(path, data, "success", "b", True)),
+                              status=int(_scalar(path, data, "status", "i", 0)),
+                              message=str(_scalar(path, data, "message", "U", "")),
+                              method=str(_scalar(path, data, "method", "U", "")))
     return result, scene, data["stiffness"]
+
+
+def _scalar(path, data, name, kind, default=None):
+    """Stored 0-d array ``name`` as a Python value of kind i (integer), b (bool)
+    or U (text); TrajectoryError naming it if it has another type or shape."""
+    if name not in data:
+        return default
+    a = data[name]
+    ok = a.shape == () and (a.dtype.kind in ("iu" if kind == "i" else kind)
+                            or (kind == "b" and a.dtype.kind in "iu"))
+    if not ok:
+        want = {"i": "an integer", "b": "true or false", "U": "text"}[kind]
+        raise TrajectoryError(f"{path}: {name}: expected {want}, got an array of "
+                              f"{a.dtype} with shape {a.shape}")
+    return a.item()
+
+
+def _check_arrays(path, data):
+    """Dtype, shape and sample count of every stored per-sample array."""
+    from .validate import check_finite
+
+    def float_array(name, ndim):
+        a = data[name]
+        if a.dtype.kind not in "fiu" or a.ndim != ndim:
+            raise TrajectoryError(f"{path}: {name}: expected a {ndim}-d array of numbers, got "
+                                  f"{a.dtype} with shape {a.shape}")
+        return a
+
+    t = float_array("t", 1)
+    s = len(t)
+    if s == 0:
+        raise TrajectoryError(f"{path}: t: no samples")
+    check_finite("t", t, str(path), TrajectoryError)
+    if s > 1 and not np.all(np.diff(t) > 0):
+        raise TrajectoryError(f"{path}: t[{int(np.argmax(np.diff(t) <= 0)) + 1}]: sample "
+                              "instants must increase")
+    theta = float_array("theta", 2)
+    for name, ndim in (("omega", 2), ("rotation", 4), ("position", 3), ("linear_velocity", 3),
+                       ("angular_velocity", 3), ("constraint_gap", 1), ("closure_sigma_min", 2)):
+        a = float_array(name, ndim)
+        if len(a) != s:
+            raise TrajectoryError(f"{path}: {name} has {len(a)} samples, t has {s}")
+    if len(theta) != s:
+        raise TrajectoryError(f"{path}: theta has {len(theta)} samples, t has {s}")
+    if data["omega"].shape != theta.shape:
+        raise TrajectoryError(f"{path}: omega has shape {data['omega'].shape}, theta "
+                              f"{theta.shape}")
+    nb = data["position"].shape[1]
+    for name, shape in (("rotation", (s, nb, 3, 3)), ("position", (s, nb, 3)),
+                        ("linear_velocity", (s, nb, 3)), ("angular_velocity", (s, nb, 3))):
+        if data[name].shape != shape:
+            raise TrajectoryError(f"{path}: {name} has shape {data[name].shape}, expected {shape}")
+    for name in data:
+        if name.startswith("energy_") and (data[name].dtype.kind not in "fiu"
+                                           or data[name].shape != (s,)):
+            raise TrajectoryError(f"{path}: {name} has shape {data[name].shape}, expected ({s},)")
+    k = data["stiffness"]
+    if k.dtype.kind not in "fiu" or k.ndim != 1:
+        raise TrajectoryError(f"{path}: stiffness: expected a 1-d array of numbers, got "
+                              f"{k.dtype} with shape {k.shape}")

@@ -147,7 +147,7 @@ def test_overrides_set_keys_before_validation():
     ("gravity.x=1", "gravity: cannot set gravity.x: not a mapping"),
     ("t_end", "expected an override KEY.PATH=VALUE"),
     ("simulation..t_end=1", "expected an override KEY.PATH=VALUE"),
-    ("simulation.t_end=[1", "simulation.t_end: override value '[1' is not valid YAML"),
+    ("simulation.t_end=[1", "--set simulation.t_end: value '[1' is not valid YAML"),
 ])
 def test_bad_overrides_name_the_key(item, expected):
     with pytest.raises(SceneError, match=re.escape(expected)):

@@ -286,11 +286,22 @@ def collide_command(args) -> int:
     elif getattr(args, "scene", None):
         raise SceneError("--scene", "only for an MCAP recording; a .npz trajectory carries its scene")
     else:
-        result, scene, _ = load_trajectory(args.trajectory)
+        result, scene, stiffness = load_trajectory(args.trajectory)
     model = build_model(scene)
+    from ..validate import check_stored_trajectory
+    check_stored_trajectory(args.trajectory, result, model,
+                            None if is_mcap(args.trajectory) else stiffness)
     report = check_trajectory(model, result, CollisionSettings.from_scene(scene))
+    failed = getattr(result, "success", True) is False
     if getattr(args, "json", False):
-        print(json.dumps(report.to_dict()))
+        out = report.to_dict()
+        if failed:  # the run stopped early: the check covers only what it computed
+            out["run"] = {"success": False, "status": int(result.status), "message": result.message,
+                          "t_end": float(result.t[-1])}
+        print(json.dumps(out))
     else:
+        if failed:
+            print(f"the stored run FAILED at t = {result.t[-1]:.4g} s ({result.message}): "
+                  "checked up to there")
         print(report.summary())
     return 0

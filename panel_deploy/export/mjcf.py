@@ -47,12 +47,15 @@ Units are SI throughout, angles in radians.
 from __future__ import annotations
 
 import math
+import re
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
 from ..kinematics import forward_kinematics
 from ..model import Model
+
+_NON_FINITE = re.compile(r"(?<![\w.])-?(nan|inf)(?![\w.])")
 
 #: MuJoCo's largest constraint impedance (mjMAXIMP): the constraint is then
 #: as hard as its solref says, with 1e-4 of the unconstrained acceleration leaking.
@@ -280,9 +283,23 @@ def export_command(args, scene=None) -> int:
     from ..build import build_model
     from ..scene import load_scene
 
+    from ..errors import ModelError
+    from ..validate import check_output_path, write_atomic
+
+    check_output_path(args.mjcf, "--mjcf")
     model = build_model(scene if scene is not None else load_scene(args.scene))
-    with open(args.mjcf, "w") as f:
-        f.write(export_mjcf(model))
+    try:
+        with np.errstate(all="ignore"):
+            text = export_mjcf(model)
+    except (np.linalg.LinAlgError, ZeroDivisionError, FloatingPointError) as e:
+        raise ModelError(f"export: the model's mass matrix cannot be used ({e}): check the "
+                         "array sizes and masses") from None
+    bad = _NON_FINITE.search(text)
+    if bad:
+        line = text.count("\n", 0, bad.start()) + 1
+        raise ModelError(f"export: the model has a non-finite value ({bad.group(0)} on line {line} "
+                         "of the MJCF): check the array sizes and masses (degenerate panels?)")
+    write_atomic(args.mjcf, lambda f: f.write(text), "--mjcf")
     print(f"wrote {args.mjcf}: {model.n_bodies} bodies, {model.n_coords} joints, "
           f"{len(model.cut_hinges)} cut hinge(s)")
     return 0

@@ -72,7 +72,8 @@ def optimise_command(args, scene) -> int:
         lines.append(verdict("snapped to the springs", built))
     n = arg("perturb")
     if n:
-        tol = arg("perturb_tol") or 0.05
+        tol = arg("perturb_tol")
+        tol = 0.05 if tol is None else tol  # 0 is a request (exact copies), not "default"
         report = tolerance_check(model, result.k, scene, c=result.c, n=n, stiffness_tol=tol,
                                  damping_tol=tol, workers=arg("workers"), dask_address=arg("dask"))
         extra["tolerance"] = report.to_dict()

@@ -29,7 +29,6 @@ Format (``format: panel_deploy.stiffness/1``)::
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +37,13 @@ import yaml
 from ..errors import OptimisationError
 
 FORMAT = "panel_deploy.stiffness/1"
+#: Every top-level key a result file may have (what :func:`result_to_dict` and
+#: ``panel-deploy optimise`` write); any other is refused by :func:`load_hinges`.
+RESULT_KEYS = ("format", "scene", "hinges", "groups", "bounds", "damping_ratio",
+               "damping_ratio_bounds", "damping_window", "f", "v", "d", "collision",
+               "flat_residual", "reached_flat", "simulated", "message", "t_stop", "initial",
+               "success", "status", "nfev", "nit", "nstarts", "method", "wall_time",
+               "first_feasible", "verification", "manufacture", "tolerance")
 
 
 def result_to_dict(result, scene_name: str = "", extra: dict | None = None) -> dict:
@@ -75,13 +81,18 @@ def dump_result(result, scene_name: str = "", extra: dict | None = None) -> str:
                           default_flow_style=None)
 
 
-def save_result(result, path, scene_name: str = "", extra: dict | None = None) -> Path:
-    """Write ``result`` as YAML to ``path`` (see the module docstring); returns the path."""
-    path = Path(path)
-    part = path.with_name(path.name + ".part")
-    part.write_text(dump_result(result, scene_name, extra))
-    os.replace(part, path)  # an interrupted run never leaves half a result file
-    return path
+def save_result(result, path, scene_name: str = "", extra: dict | None = None,
+                flag: str = "--out") -> Path:
+    """Write ``result`` as YAML to ``path`` (see the module docstring); returns the path.
+
+    Raises :class:`~panel_deploy.errors.PanelDeployError` naming ``flag`` and
+    the fallback file holding the result if ``path`` cannot be written.
+    """
+    from ..validate import write_atomic
+    text = dump_result(result, scene_name, extra)
+    # an interrupted run never leaves half a result file; a failed write keeps
+    # the result in a fallback file (the error says where)
+    return write_atomic(path, lambda f: f.write(text), flag)
 
 
 def load_stiffness(path, model) -> np.ndarray:
@@ -122,16 +133,25 @@ def load_hinges(path, model) -> tuple:
     k as :func:`load_stiffness`, c as :func:`load_damping` (None if the file
     gives none); a bare number for a hinge is its k.
     """
+    from ..errors import PanelDeployError
+    from ..validate import load_yaml, read_text, yaml_problem
+
     where = f"stiffness file {str(path)!r}"
     try:
-        data = yaml.safe_load(Path(path).read_text())
-    except OSError as e:
-        raise OptimisationError(f"{where}: cannot read ({e.strerror or e})") from None
+        data = load_yaml(read_text(path, "stiffness file"))
+    except PanelDeployError as e:
+        raise OptimisationError(f"{where}: {str(e).partition(': ')[2]}") from None
     except yaml.YAMLError as e:
-        raise OptimisationError(f"{where}: not valid YAML ({e})") from None
+        raise OptimisationError(f"{where}: not valid YAML ({yaml_problem(e)})") from None
     if not isinstance(data, dict) or not isinstance(data.get("hinges"), dict):
         raise OptimisationError(f"{where}: expected a mapping with a 'hinges' mapping "
                                 f"(hinge name -> k), as written by panel-deploy optimise")
+    if "format" in data and data["format"] != FORMAT:
+        raise OptimisationError(f"{where}: format: expected {FORMAT}, got {data['format']!r}")
+    unknown = [str(key) for key in data if key not in RESULT_KEYS]
+    if unknown:
+        raise OptimisationError(f"{where}: {unknown[0]}: unknown key (a result file has "
+                                f"{', '.join(RESULT_KEYS)})")
     given = data["hinges"]
     names = [h.name for h in model.hinges]
     unknown = sorted(set(map(str, given)) - set(names))
@@ -143,6 +163,11 @@ def load_hinges(path, model) -> tuple:
         raise OptimisationError(f"{where}: hinges: missing {', '.join(missing)}")
     entries = [given[name] if isinstance(given[name], dict) else {"k": given[name]}
                for name in names]
+    for name, entry in zip(names, entries):
+        extra = [str(key) for key in entry if key not in ("k", "c")]
+        if extra:
+            raise OptimisationError(f"{where}: hinges.{name}.{extra[0]}: unknown key "
+                                    "(expected k and c)")
 
     def values(key, unit):
         out = np.empty(len(names))

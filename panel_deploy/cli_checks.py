@@ -1,0 +1,109 @@
+"""Checks of the command line's flags, run right after parsing and before any work.
+
+Every flag is checked here, named as the user typed it (``--perturb-tol``,
+not the internal ``stiffness_tol``), and every output path is checked (its
+folder exists and is writable, it is not a folder) so that a long simulation
+or search never ends in an unwritable file. Options that would be ignored or
+that conflict are errors, not silently dropped. The rules themselves are in
+:mod:`panel_deploy.validate`, shared with the ROS nodes.
+"""
+
+from __future__ import annotations
+
+from .errors import SceneError
+from .validate import check_output_path, finite_number
+
+#: Largest array ``fold --rows R --cols C`` counts: the frontier count's time
+#: and memory grow about 3-4 fold per cell of the shorter side (12 x 12:
+#: 2.7 s, 35 MB; 16 x 16: minutes, gigabytes at 20 x 20), linearly with the
+#: longer one.
+FOLD_MAX_SHORT_SIDE = 12
+FOLD_MAX_CELLS = 400
+
+#: Output flags of each command (attribute, flag).
+OUTPUTS = {
+    "simulate": (("out", "--out"), ("record", "--record")),
+    "optimise": (("out", "--out"), ("record", "--record")),
+    "run": (("record", "--record"),),
+    "export": (("mjcf", "--mjcf"),),
+    "fold": (("plot", "--plot"),),
+    "replay": (("save", "--save"), ("png", "--png")),
+    "bench": (("out", "--out"), ("plot", "--plot")),
+}
+
+
+def check_args(args) -> None:
+    """Check the parsed ``args`` of one command; :class:`SceneError` naming the flag."""
+    command = getattr(args, "command", None)
+    outputs = [(getattr(args, attr, None), flag) for attr, flag in OUTPUTS.get(command, ())]
+    seen = {}
+    for path, flag in outputs:
+        check_output_path(path, flag)
+        if path is not None:
+            if str(path) in seen:
+                raise SceneError(flag, f"{path} is also {seen[str(path)]}: give two files")
+            seen[str(path)] = flag
+    check = _CHECKS.get(command)
+    if check is not None:
+        check(args)
+
+
+def _positive_int(args, attr, flag, low=1):
+    value = getattr(args, attr, None)
+    if value is not None:
+        finite_number(value, flag, low=low, integer=True)
+
+
+def _fold(args):
+    if args.scene is not None:
+        given = [flag for attr, flag in (("rows", "--rows"), ("cols", "--cols"),
+                                         ("circuit", "--circuit"), ("limit", "--limit"))
+                 if getattr(args, attr, None) is not None]
+        if given:
+            raise SceneError(given[0], "not with --scene: the scene gives the array and its "
+                                       "circuit (use --set array.rows=... or fold.circuit=...)")
+        return
+    if getattr(args, "set", None):
+        raise SceneError("--set", "only with --scene (a scene to override); without it give "
+                                  "--rows and --cols")
+    for attr, flag in (("rows", "--rows"), ("cols", "--cols")):
+        _positive_int(args, attr, flag, low=1)
+    rows, cols = args.rows, args.cols
+    if rows is not None and cols is not None and (min(rows, cols) > FOLD_MAX_SHORT_SIDE
+                                                  or rows * cols > FOLD_MAX_CELLS):
+        raise SceneError("--rows/--cols", f"{rows} x {cols} is above the enumeration limit (the "
+                                          f"shorter side at most {FOLD_MAX_SHORT_SIDE}, at most "
+                                          f"{FOLD_MAX_CELLS} cells): counting its circuits "
+                                          "would take minutes and gigabytes")
+    _positive_int(args, "circuit", "--circuit", low=0)
+    _positive_int(args, "limit", "--limit", low=0)
+
+
+def _simulate(args):
+    from .scene import INTEGRATORS
+    if args.method is not None and args.method not in INTEGRATORS:
+        raise SceneError("--method", f"expected one of {', '.join(INTEGRATORS)}, got {args.method!r}")
+    finite_number(args.t_end, "--t-end", low=0, low_open=True)
+
+
+def _optimise(args):
+    _positive_int(args, "workers", "--workers", low=0)
+    _positive_int(args, "max_evaluations", "--max-evaluations", low=1)
+    _positive_int(args, "perturb", "--perturb", low=0)
+    tol = getattr(args, "perturb_tol", None)
+    if tol is not None:
+        if not args.perturb:
+            raise SceneError("--perturb-tol", "only with --perturb N (the copies it spreads)")
+        finite_number(tol, "--perturb-tol", low=0)
+        if not tol < 1:
+            raise SceneError("--perturb-tol", f"expected a fraction in [0, 1) (k and c stay "
+                                              f"positive), got {tol:g}")
+    if getattr(args, "dask", None) is not None and not str(args.dask).strip():
+        raise SceneError("--dask", "expected a scheduler address, got an empty string")
+
+
+def _bench(args):
+    _positive_int(args, "repeats", "--repeats", low=1)
+
+
+_CHECKS = {"fold": _fold, "simulate": _simulate, "optimise": _optimise, "bench": _bench}

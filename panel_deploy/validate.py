@@ -1,0 +1,276 @@
+"""Shared input and output checks (ROS-free): the CLI and the nodes use the same rules.
+
+* :func:`load_yaml`: YAML read by :class:`StrictLoader`, which refuses a key
+  given twice in one mapping and nesting deeper than :data:`MAX_YAML_DEPTH`.
+* :func:`check_output_path`: an output path is checked before any work is
+  done (its folder exists and is writable, the path is not a folder).
+* :func:`write_atomic`: write through a temporary file renamed into place;
+  if the write fails after all, the content goes to a fallback file in the
+  working directory (or the temporary folder) and the error says where.
+* :func:`read_text`: a text file read with every failure a one-line error.
+* :func:`check_finite`: an array with NaN or inf refused naming the array and
+  the first bad index.
+
+Every error is a :class:`~panel_deploy.errors.PanelDeployError` whose message
+names the field (a flag as the user typed it, a key path, a file and array).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from .errors import PanelDeployError, SceneError
+
+#: Deepest nesting of YAML collections accepted: a scene is four levels deep
+#: (section, key, list, pair); anything far deeper is a mistake or an attack
+#: (and would exhaust Python's recursion limit).
+MAX_YAML_DEPTH = 32
+
+
+class StrictLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` refusing duplicate keys and nesting beyond :data:`MAX_YAML_DEPTH`.
+
+    A repeated key (``simulation:`` twice) would otherwise keep the last
+    value silently and drop the first.
+    """
+
+    max_depth = MAX_YAML_DEPTH
+
+    def compose_node(self, parent, index):
+        depth = getattr(self, "_depth", 0)
+        if depth >= self.max_depth:
+            mark = self.peek_event().start_mark
+            raise yaml.composer.ComposerError(
+                None, None, f"nested deeper than {self.max_depth} levels (the limit of a scene "
+                            "file)", mark)
+        self._depth = depth + 1
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth = depth
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            seen = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                try:
+                    key = self.construct_object(key_node, deep=True)
+                    hash(key)
+                except (TypeError, yaml.YAMLError):
+                    continue  # the base class reports an unhashable key
+                if key in seen:
+                    raise yaml.constructor.ConstructorError(
+                        None, None, f"duplicate key {key!r} (first given at line "
+                                    f"{seen[key].line + 1})", key_node.start_mark)
+                seen[key] = key_node.start_mark
+        return super().construct_mapping(node, deep=deep)
+
+
+def load_yaml(text):
+    """``yaml.load(text, StrictLoader)``: raises ``yaml.YAMLError`` as safe_load does."""
+    try:
+        return yaml.load(text, Loader=StrictLoader)  # noqa: S506 (a SafeLoader subclass)
+    except RecursionError:
+        raise yaml.YAMLError(f"nested too deeply (more than {MAX_YAML_DEPTH} levels)") from None
+
+
+def yaml_problem(e: yaml.YAMLError) -> str:
+    """One line on a YAML error: ``at line L, column C: problem``."""
+    mark = getattr(e, "problem_mark", None)
+    where = f"at line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+    problem = getattr(e, "problem", None) or (str(e).splitlines() or ["invalid"])[0]
+    return where + problem
+
+
+def read_text(path, what: str = "file") -> str:
+    """The text of ``path`` (UTF-8), every failure a :class:`PanelDeployError` naming it."""
+    path = Path(path)
+    try:
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise PanelDeployError(f"{path}: {what} not found") from None
+    except IsADirectoryError:
+        raise PanelDeployError(f"{path}: {what} is a folder, not a file") from None
+    except UnicodeDecodeError as e:
+        raise PanelDeployError(f"{path}: {what} is not UTF-8 text (byte {e.start})") from None
+    except (OSError, ValueError) as e:
+        raise PanelDeployError(f"{path}: cannot read {what} ({getattr(e, 'strerror', None) or e})") from None
+
+
+def check_output_path(path, flag: str) -> Path | None:
+    """Check that ``path`` can be written, before any work is done.
+
+    Its folder must exist and be writable and the path must not be a folder
+    (an existing file is replaced). Raises :class:`SceneError` naming ``flag``
+    (``--out``). None passes (no output asked for).
+    """
+    if path is None:
+        return None
+    text = str(path)
+    if not text.strip():
+        raise SceneError(flag, "expected a file name, got an empty string")
+    p = Path(text)
+    if "\0" in text:
+        raise SceneError(flag, f"{text!r} is not a valid path")
+    if p.is_dir() or text.endswith(("/", os.sep)):
+        raise SceneError(flag, f"{text} is a folder; give a file name")
+    parent = p.parent
+    if not parent.exists():
+        raise SceneError(flag, f"folder {parent} does not exist")
+    if not parent.is_dir():
+        raise SceneError(flag, f"{parent} is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise SceneError(flag, f"folder {parent} is not writable")
+    if p.exists() and not os.access(p, os.W_OK):
+        raise SceneError(flag, f"{text} exists and is not writable")
+    return p
+
+
+def fallback_path(path) -> Path:
+    """Where content meant for ``path`` goes when ``path`` cannot be written:
+    ``panel-deploy-rescued-<name>`` in the working directory, else in the
+    temporary folder (a new name, never overwriting)."""
+    name = Path(path).name or "output"
+    for folder in (Path.cwd(), Path(tempfile.gettempdir())):
+        if os.access(folder, os.W_OK | os.X_OK):
+            stem, suffix = Path(name).stem, "".join(Path(name).suffixes)
+            fd, tmp = tempfile.mkstemp(dir=folder, prefix=f"panel-deploy-rescued-{stem}-",
+                                       suffix=suffix)
+            os.close(fd)
+            return Path(tmp)
+    raise OSError("neither the working directory nor the temporary folder is writable")
+
+
+def write_atomic(path, write, flag: str = "output", mode: str = "w") -> Path:
+    """Write a file atomically: ``write(f)`` on a temporary file in the target
+    folder, renamed over ``path``. No temporary file is left behind.
+
+    If writing fails (disk full, folder removed meanwhile, ...), the same
+    content is written to :func:`fallback_path` and a :class:`PanelDeployError`
+    names ``flag``, the reason and where the content is, so nothing computed is lost.
+    """
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    tmp = None
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".part")
+        with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8"})) as f:
+            write(f)
+        os.replace(tmp, path)
+        return path
+    except OSError as e:
+        if tmp is not None and os.path.exists(tmp):
+            os.unlink(tmp)
+        reason = e.strerror or str(e)
+        try:
+            rescue = fallback_path(path)
+            with open(rescue, mode, **({} if "b" in mode else {"encoding": "utf-8"})) as f:
+                write(f)
+        except OSError as e2:
+            raise PanelDeployError(f"{flag}: cannot write {path} ({reason}), nor a fallback "
+                                   f"file ({e2.strerror or e2}); the result is lost") from None
+        raise PanelDeployError(f"{flag}: cannot write {path} ({reason}); the result is saved "
+                               f"in {rescue}") from None
+    except BaseException:
+        if tmp is not None and os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def first_non_finite(a) -> tuple | None:
+    """Index (tuple) of the first NaN or inf of array ``a``, or None."""
+    a = np.asarray(a)
+    if a.dtype.kind not in "fc":
+        return None
+    bad = ~np.isfinite(a)
+    if not bad.any():
+        return None
+    return tuple(int(i) for i in np.unravel_index(int(np.argmax(bad)), a.shape))
+
+
+def check_finite(name: str, a, where: str = "", error=PanelDeployError):
+    """Raise ``error`` naming ``where``, ``name`` and the first NaN/inf index of ``a``."""
+    idx = first_non_finite(a)
+    if idx is not None:
+        value = np.asarray(a)[idx]
+        index = ", ".join(map(str, idx))
+        raise error(f"{where + ': ' if where else ''}{name}[{index}] is {value} "
+                    "(expected finite values)")
+    return a
+
+
+def finite_number(value, flag: str, *, low=None, high=None, low_open=False, integer=False):
+    """A flag's number checked: finite, within [low, high] (low open if asked),
+    integral if asked; :class:`SceneError` naming ``flag`` otherwise."""
+    if value is None:
+        return None
+    kind = "an integer" if integer else "a number"
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            (integer and not float(value).is_integer()):
+        raise SceneError(flag, f"expected {kind}, got {value!r}")
+    if not math.isfinite(value):
+        raise SceneError(flag, f"expected a finite number, got {value}")
+    if low is not None and (value <= low if low_open else value < low):
+        raise SceneError(flag, f"expected {kind} {'>' if low_open else '>='} {low:g}, got {value:g}")
+    if high is not None and value > high:
+        raise SceneError(flag, f"expected {kind} <= {high:g}, got {value:g}")
+    return value
+
+
+#: Largest disagreement (m, and in rotation matrix entries) between a stored
+#: pose and the one recomputed from the stored angles: round-off of the
+#: forward kinematics, with room for a file written on another machine.
+POSE_TOLERANCE = 1e-6
+
+
+def check_stored_trajectory(where, result, model, stiffness=None):
+    """A loaded trajectory checked against the model of its stored scene.
+
+    ``t``, ``theta`` and ``omega`` must be finite (first bad index named);
+    theta/omega must have one column per coordinate of ``model``; stored poses
+    (if ``result`` has them) must have one row per body and agree with the
+    poses recomputed from theta within :data:`POSE_TOLERANCE`; ``stiffness``
+    (if given) one value per hinge. Raises
+    :class:`~panel_deploy.errors.TrajectoryError` naming ``where`` and the array.
+    """
+    from .errors import TrajectoryError
+    from .kinematics import forward_kinematics
+
+    for name in ("t", "theta", "omega"):
+        check_finite(name, getattr(result, name), str(where), TrajectoryError)
+    n, nb = model.n_coords, model.n_bodies
+    for name in ("theta", "omega"):
+        a = np.asarray(getattr(result, name))
+        if a.ndim != 2 or a.shape[1] != n:
+            raise TrajectoryError(f"{where}: {name} has shape {a.shape}; the stored scene's "
+                                  f"model has {n} hinge coordinates")
+    if stiffness is not None and np.shape(stiffness) != (len(model.hinges),):
+        raise TrajectoryError(f"{where}: stiffness has shape {np.shape(stiffness)}; the stored "
+                              f"scene's model has {len(model.hinges)} hinges")
+    rotation, position = getattr(result, "rotation", None), getattr(result, "position", None)
+    if rotation is None or position is None:
+        return
+    rotation, position = np.asarray(rotation), np.asarray(position)
+    if position.shape[1:] != (nb, 3) or rotation.shape[1:] != (nb, 3, 3):
+        raise TrajectoryError(f"{where}: position/rotation have shapes {position.shape}, "
+                              f"{rotation.shape}; the stored scene's model has {nb} bodies")
+    s = len(result.t)
+    for j in sorted({0, s // 2, s - 1}):
+        R, p = forward_kinematics(model, result.theta[j])
+        for name, stored, computed in (("position", position[j], p), ("rotation", rotation[j], R)):
+            err = np.abs(np.asarray(stored) - computed)
+            if not np.all(err <= POSE_TOLERANCE):  # NaN fails too
+                b = int(np.argmax(np.nan_to_num(err, nan=np.inf).reshape(nb, -1).max(axis=1)))
+                raise TrajectoryError(
+                    f"{where}: {name}[{j}, {b}] ({model.bodies[b].name}) differs from the pose "
+                    f"its theta gives in the stored scene by {float(np.nanmax(err)):.3g} "
+                    f"(tolerance {POSE_TOLERANCE:g}): the poses or the scene do not belong to "
+                    "these angles")

@@ -121,5 +121,10 @@ def simulate_command(args, scene) -> int:
         save_trajectory(args.out, result, scene, model)
     summary = deployment_summary(model, result, report, flat_tol=scene.simulation.flat_tolerance)
     summary["scene"] = scene.name or scene.source
-    print(json.dumps(summary) if args.json else summary_text(summary))
-    return 0 if result.success else 1
+    from .validate import first_non_finite_value
+    bad = first_non_finite_value(summary)
+    if bad is not None:  # a NaN is never an answer: the run counts as failed
+        summary.update(success=False, message=f"non-finite result: {bad} ({summary['message']})")
+    print(json.dumps(summary, allow_nan=False) if args.json and bad is None else
+          json.dumps(summary) if args.json else summary_text(summary))
+    return 0 if result.success and bad is None else 1

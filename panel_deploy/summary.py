@@ -33,7 +33,7 @@ def summary_text(s: dict) -> str:
              f"in {s['wall_time']:.3g} s wall ({s['nsteps']} steps, {s['nfev']} evaluations)",
              f"first flat (every hinge within {s['flat_tolerance']} rad of 0): "
              f"{fmt(s['time_to_flat'], ' s')}",
-             f"energy balance error {s['energy_balance_error']:.2e} (relative); "
+             _balance_text(s['energy_balance_error']) + "; "
              f"max constraint gap {s['max_constraint_gap']:.3g} m"
              + ("" if s["min_closure_sigma"] is None else
                 f"; smallest closure singular value {s['min_closure_sigma']:.2e}")]
@@ -54,3 +54,19 @@ def summary_text(s: dict) -> str:
         else:
             lines.append(f"no collision; smallest distance d = {d}")
     return "\n".join(lines)
+
+
+#: Relative energy balance error above which the summary warns that the run
+#: is inaccurate (a deployment that loses or gains this much energy to the
+#: integrator is not an answer to trust: tighten simulation.rtol).
+BALANCE_WARNING = 0.01
+
+
+def _balance_text(error) -> str:
+    if error is None:
+        return "energy balance error not meaningful (no energy at the start, or non-finite)"
+    text = f"energy balance error {error:.2e} (relative)"
+    if error > BALANCE_WARNING:
+        text += (f" -- LARGE (above {BALANCE_WARNING:g}): the integration is inaccurate, "
+                 "tighten simulation.rtol")
+    return text

@@ -23,7 +23,7 @@ import yaml
 
 from .dynamics.result import SimulationResult
 from .errors import SceneError, TrajectoryError
-from .validate import load_yaml
+from .validate import load_yaml, yaml_problem
 
 FORMAT_VERSION = 1
 _ARRAYS = ("t", "theta", "omega", "rotation", "position", "linear_velocity",
@@ -92,8 +92,10 @@ def load_trajectory(path):
     _check_arrays(path, data)
     try:
         scene = scene_from_dict(load_yaml(_scalar(path, data, "scene_yaml", "U")))
-    except (SceneError, yaml.YAMLError) as e:
+    except SceneError as e:
         raise TrajectoryError(f"{path}: stored scene is invalid ({e})") from None
+    except yaml.YAMLError as e:
+        raise TrajectoryError(f"{path}: stored scene is invalid ({yaml_problem(e)})") from None
     energy = {k[len("energy_"):]: v for k, v in data.items() if k.startswith("energy_")}
     result = SimulationResult(**{k: data[k] for k in _ARRAYS}, energy=energy,
                               success=bool(_scalar(path, data, "success", "b", True)),

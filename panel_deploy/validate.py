@@ -274,3 +274,23 @@ def check_stored_trajectory(where, result, model, stiffness=None):
                     f"its theta gives in the stored scene by {float(np.nanmax(err)):.3g} "
                     f"(tolerance {POSE_TOLERANCE:g}): the poses or the scene do not belong to "
                     "these angles")
+
+
+def first_non_finite_value(value, path: str = "") -> str | None:
+    """Key path (``collision.v``, ``final_angles.h1``) of the first NaN/inf
+    float in a JSON-like value (dicts, lists, numbers), or None."""
+    if isinstance(value, float):
+        return None if math.isfinite(value) else f"{path or 'value'} = {value}"
+    if isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, (list, tuple)):
+        items = ((f"[{i}]", v) for i, v in enumerate(value))
+    else:
+        return None
+    for key, v in items:
+        if isinstance(v, (float, dict, list, tuple)):
+            sub = f"{path}{key}" if str(key).startswith("[") else (f"{path}.{key}" if path else str(key))
+            bad = first_non_finite_value(v, sub)
+            if bad is not None:
+                return bad
+    return None

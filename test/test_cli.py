@@ -178,3 +178,225 @@ def test_sigterm_inside_numbas_callback_is_delivered_again_later():
             time.sleep(2.0)
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+# --- issue 19: every bad input is one line naming the field, exit 2, before any work ---
+
+def one_line_error(capsys, argv, monkeypatch=None):
+    """Run ``argv``; assert exit 2 and exactly one stderr line; return it."""
+    try:
+        code = main(list(argv))
+    except SystemExit as e:  # argparse
+        code = e.code
+    err = capsys.readouterr().err
+    assert code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Any simulation, search, export or plot started fails the test."""
+    def started(*a, **k):
+        raise AssertionError("work started before the arguments were checked")
+    import panel_deploy.dynamics as dynamics
+    import panel_deploy.export.mjcf as mjcf
+    import panel_deploy.fold.plot as plot
+    import panel_deploy.optimise.search as search
+    monkeypatch.setattr(dynamics, "simulate", started)
+    monkeypatch.setattr(search, "optimise", started)
+    monkeypatch.setattr(mjcf, "export_mjcf", started)
+    monkeypatch.setattr(plot, "plot_design", started)
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["simulate", PAPER, "--out", "{missing}/t.npz"], "--out: folder"),
+    (["simulate", PAPER, "--out", "{tmp}"], "--out: {tmp} is a folder"),
+    (["optimise", PAPER, "--out", "{missing}/k.yaml"], "--out: folder"),
+    (["optimise", PAPER, "--out", "{tmp}"], "is a folder"),
+    (["export", PAPER, "--mjcf", "{missing}/m.xml"], "--mjcf: folder"),
+    (["export", PAPER, "--mjcf", "{tmp}"], "--mjcf: {tmp} is a folder"),
+    (["fold", "--scene", PAPER, "--plot", "{missing}/p.png"], "--plot: folder"),
+    (["fold", "--rows", "4", "--cols", "4", "--plot", "{tmp}"], "--plot: {tmp} is a folder"),
+    (["bench", "work-precision", PAPER, "--out", "{missing}/w.csv"], "--out: folder"),
+    (["bench", "work-precision", PAPER, "--repeats", "0"], "--repeats: expected an integer >= 1"),
+    (["optimise", PAPER, "--perturb", "-2"], "--perturb: expected an integer >= 0"),
+    (["optimise", PAPER, "--perturb", "3", "--perturb-tol", "1.5"], "--perturb-tol: expected a fraction"),
+    (["optimise", PAPER, "--perturb", "3", "--perturb-tol", "nan"], "--perturb-tol: expected a finite"),
+    (["optimise", PAPER, "--perturb-tol", "0.1"], "--perturb-tol: only with --perturb"),
+    (["optimise", PAPER, "--springs", "0.1,inf"], "argument --springs: expected finite"),
+    (["optimise", PAPER, "--max-evaluations", "0"], "--max-evaluations: expected an integer >= 1"),
+    (["optimise", PAPER, "--method", ""], "argument --method: invalid choice"),
+    (["simulate", PAPER, "--method", ""], "--method: expected one of"),
+    (["simulate", PAPER, "--t-end", "inf"], "--t-end: expected a finite number"),
+    (["simulate", PAPER, "--t-end", "1e6"], "--t-end: expected a number <= 600"),
+    (["simulate", PAPER, "--t-end", "abc"], "argument --t-end: invalid float value"),
+    (["fold", "--scene", PAPER, "--rows", "3"], "--rows: not with --scene"),
+    (["fold", "--scene", PAPER, "--circuit", "1"], "--circuit: not with --scene"),
+    (["fold", "--rows", "4", "--cols", "4", "--set", "array.rows=x"], "--set: only with --scene"),
+    (["fold", "--rows", "40", "--cols", "40"], "--rows/--cols: 40 x 40 is above the enumeration limit"),
+    (["fold", "--rows", "4", "--cols", "0"], "--cols: expected an integer >= 1"),
+])
+def test_bad_flags_and_output_paths_fail_before_any_work(capsys, tmp_path, no_work, argv, expected):
+    fill = {"missing": str(tmp_path / "missing"), "tmp": str(tmp_path)}
+    line = one_line_error(capsys, [a.format(**fill) for a in argv])
+    assert expected.format(**fill) in line, line
+    assert not list(tmp_path.iterdir())  # nothing written, no stray .part
+
+
+@pytest.mark.parametrize("item, expected", [
+    ("simulation.samples=10000000", "--set simulation.samples: expected an integer <= 50000"),
+    ("simulation.max_step=1e-9", "--set simulation.max_step: t_end / max_step"),
+    ("hinges.stiffness=1e300", "--set hinges.stiffness: expected a number <= 10000"),
+    ("gravity=[0, 1e300, 0]", "--set gravity[1]: expected |g| <= 9810"),
+    ("array.length=1e-300", "--set array.length: expected a number >= 1e-06"),
+    ("array.rows=40", "--set array.rows: expected an integer <= 12"),
+    ("simulation.t_end=" + "[" * 100 + "]" * 100, "--set simulation.t_end: value"),
+])
+def test_absurd_values_fail_at_once_naming_the_set_item(capsys, no_work, item, expected):
+    line = one_line_error(capsys, ["simulate", PAPER, "--set", item])
+    assert expected in line, line
+    assert "paper_4x4.yaml" not in line  # a command-line mistake is not blamed on the file
+
+
+def test_duplicate_scene_sections_are_refused(capsys, tmp_path, no_work):
+    scene = tmp_path / "dup.yaml"
+    scene.write_text(Path(PAPER).read_text() + "\nsimulation: {method: RK45}\n")
+    line = one_line_error(capsys, ["simulate", str(scene)])
+    assert "dup.yaml: malformed YAML at line 125" in line
+    assert "duplicate key 'simulation'" in line
+
+
+@pytest.fixture(scope="module")
+def trajectory(tmp_path_factory):
+    path = tmp_path_factory.mktemp("traj") / "t.npz"
+    assert main(["simulate", PAPER, "--t-end", "0.01", "--method", "compiled", "--closure", "exact",
+                 "--out", str(path)]) == 0
+    return path
+
+
+def rewrite(src, dst, **changes):
+    with np.load(src) as z:
+        data = {k: z[k] for k in z.files}
+    data.update(changes)
+    np.savez_compressed(dst, **data)
+    return dst
+
+
+def test_trajectory_records_the_flags_the_run_used(trajectory):
+    _, scene, _ = load_trajectory(trajectory)
+    assert scene.closure.method == "exact" and scene.data["closure"]["method"] == "exact"
+    assert scene.simulation.t_end == 0.01 and scene.data["simulation"]["method"] == "compiled"
+
+
+def test_collide_refuses_non_finite_angles_naming_the_first(capsys, tmp_path, trajectory):
+    with np.load(trajectory) as z:
+        theta, omega = z["theta"].copy(), z["omega"].copy()
+    theta[7, 3] = np.nan
+    omega[2, 0] = np.inf
+    for name, value, where in (("theta", theta, "theta[7, 3] is nan"),
+                               ("omega", omega, "omega[2, 0] is inf")):
+        bad = rewrite(trajectory, tmp_path / f"{name}.npz", **{name: value})
+        line = one_line_error(capsys, ["collide", str(bad)])
+        assert where in line and str(bad) in line, line
+
+
+def test_collide_checks_the_stored_poses_and_scene(capsys, tmp_path, trajectory):
+    with np.load(trajectory) as z:
+        position = z["position"].copy()
+        scene_yaml = str(z["scene_yaml"])
+    position[-1, 4, 0] += 1e-3
+    line = one_line_error(capsys, ["collide", str(rewrite(trajectory, tmp_path / "p.npz",
+                                                          position=position))])
+    assert "position[" in line and "differs from the pose" in line, line
+    # Another scene with the same hinge count: the poses do not belong to it.
+    import yaml
+    data = yaml.safe_load(scene_yaml)
+    data["array"]["length"] = 0.12  # another array, same hinge count: other poses
+    other = yaml.safe_dump(data)
+    line = one_line_error(capsys, ["collide", str(rewrite(trajectory, tmp_path / "s.npz",
+                                                          scene_yaml=np.array(other)))])
+    assert "differs from the pose" in line, line
+
+
+@pytest.mark.parametrize("change, expected", [
+    ({"format_version": np.array("one")}, "format_version: expected an integer"),
+    ({"format_version": np.array([1, 1])}, "format_version: expected an integer"),
+    ({"t": np.array([[0.0, 1.0]])}, "t: expected a 1-d array"),
+    ({"t": np.array(["a", "b"])}, "t: expected a 1-d array of numbers"),
+    ({"scene_yaml": np.array("array: {}\narray: {}\n")}, "duplicate key 'array'"),
+    ({"stiffness": np.zeros(3)}, "stiffness has shape (3,)"),
+])
+def test_malformed_trajectory_arrays_are_one_line(capsys, tmp_path, trajectory, change, expected):
+    line = one_line_error(capsys, ["collide", str(rewrite(trajectory, tmp_path / "x.npz", **change))])
+    assert expected in line, line
+
+
+def test_corrupt_compressed_data_is_one_line(capsys, tmp_path, trajectory):
+    data = bytearray(trajectory.read_bytes())
+    i = data.index(b"theta.npy") + 200  # inside theta's deflated data
+    data[i:i + 64] = bytes(64)
+    bad = tmp_path / "zlib.npz"
+    bad.write_bytes(bytes(data))
+    line = one_line_error(capsys, ["collide", str(bad)])
+    assert "not a readable trajectory file" in line, line
+
+
+def test_collide_says_when_the_stored_run_failed(capsys, tmp_path, trajectory):
+    bad = rewrite(trajectory, tmp_path / "f.npz", success=np.array(False), status=np.array(-1),
+                  message=np.array("step size collapsed"))
+    code, out, _ = run(capsys, "collide", str(bad))
+    assert code == 0 and out.startswith("the stored run FAILED at t = 0.01 s (step size collapsed)")
+    code, out, _ = run(capsys, "collide", str(bad), "--json")
+    assert json.loads(out)["run"] == {"success": False, "status": -1,
+                                      "message": "step size collapsed", "t_end": 0.01}
+
+
+def _hinges(tmp_path, text):
+    path = tmp_path / "k.yaml"
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    return str(path)
+
+
+@pytest.mark.parametrize("flag", ["--stiffness", "--start"])
+@pytest.mark.parametrize("text, expected", [
+    (b"hinges: {a: \xff\xfe}\n", "is not UTF-8 text"),
+    ("format: other/2\nhinges: {a: 1}\n", "format: expected panel_deploy.stiffness/1"),
+    ("hinges: {a: 1}\nbogus: 3\n", "bogus: unknown key"),
+    ("hinges: {a: 1}\nhinges: {b: 2}\n", "duplicate key 'hinges'"),
+])
+def test_bad_result_files_are_one_line(capsys, tmp_path, no_work, flag, text, expected):
+    command = "simulate" if flag == "--stiffness" else "optimise"
+    line = one_line_error(capsys, [command, PAPER, flag, _hinges(tmp_path, text)])
+    assert "stiffness file" in line and expected in line, line
+
+
+def test_export_refuses_degenerate_models(capsys, tmp_path, monkeypatch):
+    from panel_deploy.export import mjcf
+    real = mjcf.export_mjcf
+    monkeypatch.setattr(mjcf, "export_mjcf", lambda m: real(m).replace('pos="0.0', 'pos="nan', 1))
+    out = tmp_path / "m.xml"
+    line = one_line_error(capsys, ["export", PAPER, "--mjcf", str(out)])
+    assert "export: the model has a non-finite value (nan on line" in line
+    assert not list(tmp_path.iterdir())
+
+
+def test_optimise_result_is_rescued_when_the_folder_vanishes(capsys, tmp_path, monkeypatch):
+    folder = tmp_path / "out"
+    folder.mkdir()
+    import panel_deploy.optimise.command as command
+    real = command.verify
+
+    def verify_then_remove(*a, **k):  # the folder goes away while the work runs
+        if folder.exists():
+            folder.rmdir()
+        return real(*a, **k)
+    monkeypatch.setattr(command, "verify", verify_then_remove)
+    monkeypatch.chdir(tmp_path)
+    line = one_line_error(capsys, ["optimise", PAPER, "--max-evaluations", "1", "--workers", "1",
+                                   "--quiet", "--set", "simulation.t_end=0.05",
+                                   "--out", str(folder / "k.yaml")])
+    assert line.startswith("panel-deploy: error: --out: cannot write") and "saved in" in line
+    rescued = Path(line.rsplit("saved in ", 1)[1])
+    assert rescued.parent == tmp_path and "hinges:" in rescued.read_text()

@@ -1,0 +1,81 @@
+"""The shared checks of panel_deploy.validate: YAML loader, output paths, atomic writes, finiteness."""
+
+import os
+
+import numpy as np
+import pytest
+import yaml
+
+from panel_deploy.errors import PanelDeployError, SceneError
+from panel_deploy.validate import (MAX_YAML_DEPTH, check_finite, check_output_path,
+                                   first_non_finite_value, load_yaml, read_text, write_atomic)
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("a: 1\na: 2\n", "duplicate key 'a' (first given at line 1)"),
+    ("simulation: {rtol: 1}\narray: {}\nsimulation: {atol: 1}\n", "duplicate key 'simulation'"),
+    ("x: " + "[" * (MAX_YAML_DEPTH + 5) + "]" * (MAX_YAML_DEPTH + 5), "nested deeper than"),
+    ("x: " + "[" * 5000 + "]" * 5000, "nested deeper than"),  # no RecursionError
+])
+def test_yaml_loader_refuses_duplicates_and_depth(text, problem):
+    with pytest.raises(yaml.YAMLError, match=problem.replace("(", r"\(").replace(")", r"\)")):
+        load_yaml(text)
+
+
+def test_yaml_loader_reads_what_safe_load_reads():
+    text = "a: [1, 2.5, {b: c}]\nd: &x {e: 1}\nf: {<<: *x, g: 2}\n"
+    assert load_yaml(text) == yaml.safe_load(text)
+
+
+def test_output_path_checks(tmp_path):
+    assert check_output_path(None, "--out") is None
+    assert check_output_path(tmp_path / "a.npz", "--out") == tmp_path / "a.npz"
+    for path, message in ((tmp_path / "missing" / "a.npz", "does not exist"),
+                          (tmp_path, "is a folder"), ("", "empty string")):
+        with pytest.raises(SceneError, match=f"^--out: .*{message}"):
+            check_output_path(path, "--out")
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(SceneError, match="is not a folder"):
+        check_output_path(tmp_path / "file" / "a.npz", "--out")
+
+
+def test_atomic_write_leaves_no_part_file_and_rescues_the_content(tmp_path, monkeypatch):
+    target = tmp_path / "out" / "r.yaml"
+    target.parent.mkdir()
+    write_atomic(target, lambda f: f.write("k: 1\n"), "--out")
+    assert target.read_text() == "k: 1\n" and os.listdir(target.parent) == ["r.yaml"]
+    # The folder disappears while the work runs: the content goes to a fallback file.
+    gone = tmp_path / "gone" / "r.yaml"
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(PanelDeployError, match=r"^--out: cannot write .*saved in (\S+)$") as e:
+        write_atomic(gone, lambda f: f.write("k: 2\n"), "--out")
+    rescued = str(e.value).rsplit("saved in ", 1)[1]
+    assert open(rescued).read() == "k: 2\n" and rescued.startswith(str(tmp_path))
+    # A write that fails half-way leaves no temporary file behind.
+
+    def explode(f):
+        f.write("half")
+        raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt):
+        write_atomic(target, explode, "--out")
+    assert os.listdir(target.parent) == ["r.yaml"] and target.read_text() == "k: 1\n"
+
+
+def test_read_text_errors_are_one_line(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_bytes(b"hinges: \xff\xfe\n")
+    with pytest.raises(PanelDeployError, match="is not UTF-8 text"):
+        read_text(bad, "stiffness file")
+    with pytest.raises(PanelDeployError, match="is a folder"):
+        read_text(tmp_path, "stiffness file")
+
+
+def test_non_finite_values_are_named_with_their_first_index():
+    a = np.zeros((4, 3))
+    check_finite("theta", a)
+    a[2, 1] = np.nan
+    a[3, 0] = np.inf
+    with pytest.raises(PanelDeployError, match=r"^f.npz: theta\[2, 1\] is nan"):
+        check_finite("theta", a, "f.npz")
+    assert first_non_finite_value({"a": 1.0, "b": {"c": [1.0, float("inf")]}}) == "b.c[1] = inf"
+    assert first_non_finite_value({"a": [1.0], "n": None}) is None

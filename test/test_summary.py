@@ -21,3 +21,22 @@ def test_a_collision_before_flat_or_without_flat_is_not():
     for flat in (0.9, None):
         line = summary_text(summary(flat, 0.8358)).splitlines()[-1]
         assert line.startswith("first collision at 0.8358 s between A and B")
+
+
+def test_energy_balance_is_flagged_when_large_and_withheld_when_meaningless():
+    s = summary(None, 0.5)
+    for error, shown in ((1e-6, "energy balance error 1.00e-06 (relative);"),
+                         (0.26, "2.60e-01 (relative) -- LARGE (above 0.01)"),
+                         (None, "energy balance error not meaningful")):
+        s["energy_balance_error"] = error
+        assert shown in summary_text(s)
+
+
+def test_zero_energy_run_reports_no_balance_error(capsys):
+    import json
+
+    from panel_deploy.cli import main
+    code = main(["simulate", "paper_4x4", "--t-end", "0.02", "--method", "compiled", "--json",
+                 "--set", "hinges.stiffness=0", "--set", "gravity=[0, 0, 0]"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["energy_balance_error"] is None  # was 1.6e17

@@ -36,7 +36,7 @@ setup(
     extras_require={
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
         "test": ["pytest>=7", "mujoco>=3.0", "dask[distributed]>=2024.1", "yourdfpy>=0.0.56",
-                 "mcap-ros2-support>=0.5"],
+                 "mcap-ros2-support>=0.5", "hypothesis>=6.100"],
     },
     zip_safe=True,
     entry_points={

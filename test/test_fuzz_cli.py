@@ -1,0 +1,291 @@
+"""Fuzz test of the command line's error contract (issue 19), with hypothesis.
+
+Random scene mutations, random ``--set`` values, random byte corruptions of
+scene, result and trajectory files, run through :func:`panel_deploy.cli.main`
+in-process. Each run must end with exit 0 or 1 and a finite answer, or exit 2
+with exactly one line on stderr; never a traceback (any other exception fails).
+
+The example budget is fixed and the examples derandomised, so CI runs the same
+cases every time in well under a minute; ``bench/fuzz_cli.py`` runs the same
+properties with a larger budget and reports outcomes by class.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from panel_deploy.cli import main
+from panel_deploy.scene import SECTIONS
+from panel_deploy.validate import first_non_finite_value
+
+PAPER = Path(__file__).resolve().parent.parent / "config" / "scenes" / "paper_4x4.yaml"
+PAPER_TEXT = PAPER.read_text()
+PAPER_DATA = yaml.safe_load(PAPER_TEXT)
+#: Every schema key path, plus a few that do not exist.
+KEYS = sorted([f"{name}.{f}" for name, cls in SECTIONS.items() for f in cls.__dataclass_fields__]
+              + ["gravity", "name", "description", "bogus", "array.bogus", "simulation"])
+#: Short runs: the properties test the contract, not the physics.
+FAST = ["--set", "simulation.t_end=0.003", "--set", "simulation.samples=4",
+        "--set", "simulation.method=compiled"]
+
+CI = settings(max_examples=25, deadline=None, derandomize=True, database=None,
+              suppress_health_check=list(HealthCheck))
+
+#: Outcomes of every run (kind, exit code, seconds, first stderr line): read by bench/fuzz_cli.py.
+LOG: list = []
+
+
+class Broken(AssertionError):
+    """The contract broken: a traceback, a non-finite answer, or a multi-line error."""
+
+
+def run_cli(kind: str, argv) -> tuple[int, str, str]:
+    """Run ``panel-deploy argv`` in-process; check the contract; log the outcome."""
+    out, err = io.StringIO(), io.StringIO()
+    start = time.perf_counter()
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main([str(a) for a in argv])
+            except SystemExit as e:  # argparse's one-line errors
+                code = e.code
+    except Exception as e:  # noqa: BLE001 - a traceback is exactly what we look for
+        raise Broken(f"{kind}: traceback {type(e).__name__}: {e} for {argv}") from e
+    seconds = time.perf_counter() - start
+    out, err = out.getvalue(), err.getvalue()
+    lines = err.strip().splitlines()
+    LOG.append((kind, code, seconds, lines[0] if lines else "", argv))
+    if code == 2:
+        if len(lines) != 1 or not lines[0].startswith("panel-deploy"):
+            raise Broken(f"{kind}: exit 2 needs one line on stderr, got {err!r} for {argv}")
+    elif code in (0, 1):
+        if "--json" in argv:
+            bad = first_non_finite_value(json.loads(out))
+            if bad is not None and json.loads(out).get("success", True):
+                raise Broken(f"{kind}: non-finite answer {bad} for {argv}")
+        elif any(w in out for w in (" nan", "(nan", " inf ")):
+            raise Broken(f"{kind}: non-finite answer in {out!r} for {argv}")
+    else:
+        raise Broken(f"{kind}: exit code {code} for {argv}: {err!r}")
+    return code, out, err
+
+
+# --- strategies ---
+
+finite = st.floats(allow_nan=False, allow_infinity=False)
+values = st.recursive(
+    st.none() | st.booleans() | st.integers(-10**6, 10**6) | st.floats()
+    | st.sampled_from([0, 1, 3, 1e-300, 1e300, -1, 0.5, 1e-9, 50_001, "auto", "none", "penalty",
+                       "exact", "RK45", "global", [1, 2], [[1, 1], [1, 2]], [0, 0, 0]])
+    | st.text(max_size=8),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=5), inner,
+                                                                 max_size=3),
+    max_leaves=6)
+yaml_text = st.one_of(
+    st.text(max_size=20),
+    values.map(lambda v: yaml.safe_dump(v, default_flow_style=True).strip()),
+    st.sampled_from([".nan", ".inf", "-.inf", "1e400", "[", "{a: 1, a: 2}", "*x", "!!python/none",
+                     "[" * 60 + "]" * 60, "0x1F", "1_000", "~", "''"]))
+
+
+def _set(data, key, value):
+    *parents, last = key.split(".")
+    node = data
+    for p in parents:
+        if not isinstance(node.get(p), dict):
+            node[p] = {}
+        node = node[p]
+    node[last] = value
+
+
+def _corrupt(data: bytes, draw_ops) -> bytes:
+    b = bytearray(data)
+    for op, pos, byte in draw_ops:
+        if not b:
+            break
+        i = pos % len(b)
+        if op == "flip":
+            b[i] ^= 1 << (byte % 8)
+        elif op == "set":
+            b[i] = byte
+        elif op == "cut":
+            del b[i:]
+        elif op == "insert":
+            b[i:i] = bytes([byte]) * 3
+        elif op == "delete":
+            del b[i:i + 1 + byte % 16]
+    return bytes(b)
+
+
+corruptions = st.lists(st.tuples(st.sampled_from(["flip", "set", "cut", "insert", "delete"]),
+                                 st.integers(0, 10**7), st.integers(0, 255)), min_size=1, max_size=4)
+
+
+# --- the cases (plain functions: bench/fuzz_cli.py wraps them with another budget) ---
+
+def case_scene_mutation(mutations, command):
+    data = yaml.safe_load(PAPER_TEXT)
+    for key, value in mutations:
+        _set(data, key, value)
+    with tempfile.TemporaryDirectory() as tmp:
+        scene = Path(tmp) / "s.yaml"
+        scene.write_text(yaml.safe_dump(data))
+        _command(command, scene, tmp)
+
+
+def case_set_values(items, command):
+    with tempfile.TemporaryDirectory() as tmp:
+        extra = [a for key, text in items for a in ("--set", f"{key}={text}")]
+        _command(command, PAPER, tmp, extra)
+
+
+def case_scene_bytes(ops, command):
+    with tempfile.TemporaryDirectory() as tmp:
+        scene = Path(tmp) / "s.yaml"
+        scene.write_bytes(_corrupt(PAPER_TEXT.encode(), ops))
+        _command(command, scene, tmp)
+
+
+def _command(command, scene, tmp, extra=()):
+    if command == "simulate":
+        run_cli("simulate", ["simulate", scene, "--json", *FAST, *extra])
+    elif command == "export":
+        run_cli("export", ["export", scene, "--mjcf", Path(tmp) / "m.xml", *extra])
+    else:
+        run_cli("fold", ["fold", "--scene", scene, "--json", *extra])
+
+
+def case_result_bytes(ops, result_text):
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "k.yaml"
+        path.write_bytes(_corrupt(result_text.encode(), ops))
+        run_cli("result", ["simulate", PAPER, "--json", "--stiffness", path, *FAST])
+
+
+def case_trajectory_bytes(ops, trajectory: bytes):
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "t.npz"
+        path.write_bytes(_corrupt(trajectory, ops))
+        run_cli("trajectory", ["collide", path, "--json"])
+
+
+def case_trajectory_arrays(name, value, trajectory: bytes):
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(tmp) / "src.npz"
+        src.write_bytes(trajectory)
+        with np.load(src) as z:
+            data = {k: z[k] for k in z.files}
+        data[name] = value
+        path = Path(tmp) / "t.npz"
+        np.savez(path, **data)
+        run_cli("trajectory", ["collide", path, "--json"])
+
+
+def _array(v):
+    try:
+        return np.array(v)
+    except ValueError:  # ragged nesting
+        return np.array(str(v))
+
+
+arrays = st.one_of(
+    values.map(_array),
+    st.tuples(st.integers(0, 5), st.integers(0, 13), st.sampled_from([np.nan, np.inf, 1e300, 0.0]))
+    .map(lambda s: np.full((s[0], s[1]), s[2])))
+array_names = st.sampled_from(["t", "theta", "omega", "rotation", "position", "constraint_gap",
+                               "closure_sigma_min", "energy_kinetic", "stiffness", "scene_yaml",
+                               "format_version", "success", "status", "message", "method"])
+
+
+# --- fixtures: one valid result file and one valid trajectory ---
+
+@pytest.fixture(scope="module")
+def result_text():
+    return make_result_text()
+
+
+def make_result_text() -> str:
+    """A valid result file for the paper scene (k 0.05, c/k 0.043 at every hinge)."""
+    from panel_deploy.build import build_model
+    from panel_deploy.scene import load_scene
+    names = [h.name for h in build_model(load_scene(PAPER)).hinges]
+    return ("format: panel_deploy.stiffness/1\nscene: paper_4x4\nhinges:\n"
+            + "".join(f"  {n}: {{k: 0.05, c: 0.00215}}\n" for n in names))
+
+
+@pytest.fixture(scope="module")
+def trajectory(tmp_path_factory):
+    path = tmp_path_factory.mktemp("fuzz") / "t.npz"
+    assert main(["simulate", str(PAPER), "--out", str(path), *FAST,
+                 "--set", "simulation.samples=9"]) == 0
+    return path.read_bytes()
+
+
+# --- the properties ---
+
+#: Values a schema key may well accept, so that runs also get past validation.
+plausible = st.floats(1e-3, 5.0) | st.integers(1, 6)
+mutation = st.tuples(st.sampled_from(KEYS), plausible | values)
+commands = st.sampled_from(["export", "fold", "simulate"])
+
+
+@CI
+@given(st.lists(mutation, min_size=1, max_size=3), commands)
+def test_fuzz_scene_mutations(mutations, command):
+    case_scene_mutation(mutations, command)
+
+
+@CI
+@given(st.lists(st.tuples(st.sampled_from(KEYS), yaml_text), min_size=1, max_size=3), commands)
+def test_fuzz_set_values(items, command):
+    case_set_values(items, command)
+
+
+@CI
+@given(corruptions, st.sampled_from(["export", "fold"]))
+def test_fuzz_scene_bytes(ops, command):
+    case_scene_bytes(ops, command)
+
+
+@settings(CI, max_examples=15)
+@given(ops=corruptions)
+def test_fuzz_result_bytes(result_text, ops):
+    case_result_bytes(ops, result_text)
+
+
+@CI
+@given(ops=corruptions)
+def test_fuzz_trajectory_bytes(trajectory, ops):
+    case_trajectory_bytes(ops, trajectory)
+
+
+@CI
+@given(name=array_names, value=arrays)
+def test_fuzz_trajectory_arrays(trajectory, name, value):
+    case_trajectory_arrays(name, value, trajectory)
+
+
+def test_the_contract_check_can_fail(monkeypatch):
+    """run_cli catches what it is there for: a traceback, and an exit 2 of several lines."""
+    import panel_deploy.cli as cli
+    monkeypatch.setattr(cli, "cmd_schema", lambda args: 1 / 0)
+    with pytest.raises(Broken, match="traceback ZeroDivisionError"):
+        run_cli("self", ["schema"])
+
+    def two_lines(args):
+        print("panel-deploy: error: a\nb", file=__import__("sys").stderr)
+        return 2
+    monkeypatch.setattr(cli, "cmd_schema", two_lines)
+    with pytest.raises(Broken, match="one line"):
+        run_cli("self", ["schema"])

@@ -39,7 +39,7 @@ KEYS = sorted([f"{name}.{f}" for name, cls in SECTIONS.items() for f in cls.__da
 FAST = ["--set", "simulation.t_end=0.003", "--set", "simulation.samples=4",
         "--set", "simulation.method=compiled"]
 
-CI = settings(max_examples=25, deadline=None, derandomize=True, database=None,
+CI = settings(max_examples=60, deadline=None, derandomize=True, database=None,
               suppress_health_check=list(HealthCheck))
 
 #: Outcomes of every run (kind, exit code, seconds, first stderr line): read by bench/fuzz_cli.py.
@@ -258,7 +258,7 @@ def test_fuzz_scene_bytes(ops, command):
     case_scene_bytes(ops, command)
 
 
-@settings(CI, max_examples=15)
+@settings(CI, max_examples=40)
 @given(ops=corruptions)
 def test_fuzz_result_bytes(result_text, ops):
     case_result_bytes(ops, result_text)

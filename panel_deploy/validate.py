@@ -124,11 +124,11 @@ def check_output_path(path, flag: str) -> Path | None:
         raise SceneError(flag, f"{text} is a folder; give a file name")
     parent = p.parent
     if not parent.exists():
-        raise SceneError(flag, f"folder {parent} does not exist")
+        raise SceneError(flag, f"cannot write {text}: folder {parent} does not exist")
     if not parent.is_dir():
-        raise SceneError(flag, f"{parent} is not a folder")
+        raise SceneError(flag, f"cannot write {text}: {parent} is not a folder")
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise SceneError(flag, f"folder {parent} is not writable")
+        raise SceneError(flag, f"cannot write {text}: folder {parent} is not writable")
     if p.exists() and not os.access(p, os.W_OK):
         raise SceneError(flag, f"{text} exists and is not writable")
     return p

@@ -211,15 +211,15 @@ def no_work(monkeypatch):
 
 
 @pytest.mark.parametrize("argv, expected", [
-    (["simulate", PAPER, "--out", "{missing}/t.npz"], "--out: folder"),
+    (["simulate", PAPER, "--out", "{missing}/t.npz"], "--out: cannot write {missing}/t.npz: folder"),
     (["simulate", PAPER, "--out", "{tmp}"], "--out: {tmp} is a folder"),
-    (["optimise", PAPER, "--out", "{missing}/k.yaml"], "--out: folder"),
+    (["optimise", PAPER, "--out", "{missing}/k.yaml"], "--out: cannot write {missing}/k.yaml: folder"),
     (["optimise", PAPER, "--out", "{tmp}"], "is a folder"),
-    (["export", PAPER, "--mjcf", "{missing}/m.xml"], "--mjcf: folder"),
+    (["export", PAPER, "--mjcf", "{missing}/m.xml"], "--mjcf: cannot write {missing}/m.xml: folder"),
     (["export", PAPER, "--mjcf", "{tmp}"], "--mjcf: {tmp} is a folder"),
-    (["fold", "--scene", PAPER, "--plot", "{missing}/p.png"], "--plot: folder"),
+    (["fold", "--scene", PAPER, "--plot", "{missing}/p.png"], "--plot: cannot write {missing}/p.png: folder"),
     (["fold", "--rows", "4", "--cols", "4", "--plot", "{tmp}"], "--plot: {tmp} is a folder"),
-    (["bench", "work-precision", PAPER, "--out", "{missing}/w.csv"], "--out: folder"),
+    (["bench", "work-precision", PAPER, "--out", "{missing}/w.csv"], "--out: cannot write {missing}/w.csv: folder"),
     (["bench", "work-precision", PAPER, "--repeats", "0"], "--repeats: expected an integer >= 1"),
     (["optimise", PAPER, "--perturb", "-2"], "--perturb: expected an integer >= 0"),
     (["optimise", PAPER, "--perturb", "3", "--perturb-tol", "1.5"], "--perturb-tol: expected a fraction"),

@@ -140,7 +140,7 @@ def load_hinges(path, model) -> tuple:
     try:
         data = load_yaml(read_text(path, "stiffness file"))
     except PanelDeployError as e:
-        raise OptimisationError(f"{where}: {str(e).partition(': ')[2]}") from None
+        raise OptimisationError(f"{where}: cannot read ({str(e).rpartition(': ')[2]})") from None
     except yaml.YAMLError as e:
         raise OptimisationError(f"{where}: not valid YAML ({yaml_problem(e)})") from None
     if not isinstance(data, dict) or not isinstance(data.get("hinges"), dict):
@@ -148,7 +148,9 @@ def load_hinges(path, model) -> tuple:
                                 f"(hinge name -> k), as written by panel-deploy optimise")
     if "format" in data and data["format"] != FORMAT:
         raise OptimisationError(f"{where}: format: expected {FORMAT}, got {data['format']!r}")
-    unknown = [str(key) for key in data if key not in RESULT_KEYS]
+    # A hand-written file (no format) gets no unknown key past: a misspelt key
+    # would be ignored silently. Files save_result wrote may carry extra sections.
+    unknown = [str(key) for key in data if key not in RESULT_KEYS] if "format" not in data else []
     if unknown:
         raise OptimisationError(f"{where}: {unknown[0]}: unknown key (a result file has "
                                 f"{', '.join(RESULT_KEYS)})")

@@ -29,6 +29,7 @@ setup(
         "python-fcl>=0.7",
         "numba>=0.59",
         "matplotlib>=3.7",
+        "tqdm>=4.60",
         "mcap>=1.6",
         "rosbags>=0.11",
         "rerun-sdk~=0.41.0",

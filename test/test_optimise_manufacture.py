@@ -147,3 +147,11 @@ def test_feasible_interval_is_clopper_pearson():
     lo, hi = report(13).feasible_interval(0.9)
     assert lo < 13 / 20 < hi and report(13).feasible_interval(0.99)[0] < lo
     assert report(20).to_dict()["feasible_interval_95"] == pytest.approx([0.8316, 1.0], abs=1e-4)
+
+
+def test_tolerance_check_reports_progress_in_batches():
+    done = []
+    report = tolerance_check(chain_model(), [0.05] * 3, scene(), n=5, stiffness_tol=0.1,
+                             damping_tol=0.1, workers=1, evaluation=band_outcome, seed=2,
+                             progress=done.append)
+    assert done == [2, 4, 5] and len(report.evaluations) == 5

@@ -7,6 +7,7 @@ import json
 import sys
 
 from ..errors import DesignError
+from ..progress import Progress
 from .circuits import ENUMERATION_LIMIT, count_circuits, count_circuits_up_to_symmetry
 from .design import FoldDesign
 
@@ -126,12 +127,13 @@ def design_text(d: FoldDesign, index: int | None = None) -> str:
     return "\n".join(lines)
 
 
-def designs_summary(rows: int, cols: int, limit: int = 50) -> dict:
+def designs_summary(rows: int, cols: int, limit: int = 50, progress=None) -> dict:
     """Count the circuits of an array and report the first `limit` designs.
 
     The total comes from the frontier DP; the orbit count and the number of
     packable circuits only when the array has at most 36 cells (they need
-    every circuit), otherwise they are None.
+    every circuit), otherwise they are None. ``progress``, if given, is
+    called with no argument after each circuit examined.
 
     Returns
     -------
@@ -149,6 +151,8 @@ def designs_summary(rows: int, cols: int, limit: int = 50) -> dict:
     packable = 0 if small else None
     it = designs(rows, cols)
     for i, d in it if small else itertools.islice(it, limit):
+        if progress is not None:
+            progress()
         if small and d.stowed is not None:
             packable += 1
         if i < limit:
@@ -221,7 +225,10 @@ def fold_command(args) -> int:
             code = 0 if d.stowed is not None else 1
             plotted = d
         else:
-            out = designs_summary(rows, cols, limit)
+            count = count_circuits(rows, cols)
+            examined = count if rows * cols <= ENUMERATION_LIMIT else min(limit, count)
+            with Progress(examined, f"fold {rows} x {cols}", "circuits") as bar:
+                out = designs_summary(rows, cols, limit, progress=bar.update)
             code = 0
             plotted = None
             if getattr(args, "plot", None):

@@ -7,6 +7,7 @@ import sys
 
 from .io import dump_result, load_stiffness, result_to_dict, save_result
 from .manufacture import snap_to_springs, tolerance_check, verify
+from ..progress import Progress
 from .search import optimise, print_progress
 
 
@@ -38,12 +39,19 @@ def optimise_command(args, scene) -> int:
 
     model = build_model(scene)
     quiet = arg("quiet", False)
-    result = optimise(model, scene, workers=arg("workers"),
-                      dask_address=arg("dask"),
-                      progress=None if quiet else (lambda p: print_progress(p, sys.stderr)),
-                      method=arg("method"),
-                      max_evaluations=arg("max_evaluations"),
-                      k0=load_stiffness(arg("start"), model) if arg("start") else None)
+    budget = arg("max_evaluations") or scene.optimisation.max_evaluations
+    with Progress(budget, "optimise", "evaluations", enabled=not quiet) as bar:
+        def report(p):
+            if bar.live:
+                bar.update(p.nfev - bar.done, phase=p.phase, best_f=f"{p.best_f:+.5f}",
+                           feasible="yes" if not p.collision and p.reached_flat else "no")
+            else:
+                print_progress(p, sys.stderr)
+        result = optimise(model, scene, workers=arg("workers"),
+                          dask_address=arg("dask"), progress=None if quiet else report,
+                          method=arg("method"),
+                          max_evaluations=arg("max_evaluations"),
+                          k0=load_stiffness(arg("start"), model) if arg("start") else None)
     extra = {}
     if result.status == 3:
         # Ctrl-C again would lose the file: save what there is, skip the checks.
@@ -74,8 +82,11 @@ def optimise_command(args, scene) -> int:
     if n:
         tol = arg("perturb_tol")
         tol = 0.05 if tol is None else tol  # 0 is a request (exact copies), not "default"
-        report = tolerance_check(model, result.k, scene, c=result.c, n=n, stiffness_tol=tol,
-                                 damping_tol=tol, workers=arg("workers"), dask_address=arg("dask"))
+        with Progress(n, "tolerance check", "copies", enabled=not quiet) as bar:
+            report = tolerance_check(model, result.k, scene, c=result.c, n=n, stiffness_tol=tol,
+                                     damping_tol=tol, workers=arg("workers"),
+                                     dask_address=arg("dask"),
+                                     progress=lambda done: bar.update(done - bar.done))
         extra["tolerance"] = report.to_dict()
         lo, hi = report.feasible_interval()
         lines.append(f"{report.feasible} of {n} copies with k and c within +-{tol * 100:g} % collision-free "

@@ -161,14 +161,15 @@ class ToleranceReport:
 
 def tolerance_check(model, k, settings, *, c=None, n=20, stiffness_tol=0.05, damping_tol=0.05,
                     seed=0, workers=None, dask_address=None,
-                    evaluation=run_deployment) -> ToleranceReport:
+                    evaluation=run_deployment, progress=None) -> ToleranceReport:
     """Re-simulate ``n`` copies of K with every k and c off by up to the tolerances.
 
     Each hinge gets ``k (1 + e_k)`` and ``c (1 + e_c)`` with e_k, e_c
     drawn uniformly from ``[-stiffness_tol, stiffness_tol]`` and
     ``[-damping_tol, damping_tol]``; ``c`` (N m s/rad, per hinge) defaults
     to beta k with beta the model's c/k. Runs on the same backends as
-    :func:`~panel_deploy.optimise.search.optimise`.
+    :func:`~panel_deploy.optimise.search.optimise`. ``progress``, if given,
+    is called with the number of copies done after each batch.
     """
     if not isinstance(n, int) or n < 1:
         raise OptimisationError(f"n: expected an integer >= 1, got {n!r}")
@@ -183,8 +184,15 @@ def tolerance_check(model, k, settings, *, c=None, n=20, stiffness_tol=0.05, dam
     backend = make_backend(Job(model, settings, evaluation),
                            settings.optimisation.workers if workers is None else workers,
                            dask_address)
+    # Batches of a few per worker: enough to keep them busy, small enough to report.
+    batch = 2 * max(1, getattr(backend, "workers", 1))
+    evaluator = Evaluator(backend, n)
+    evs = []
     try:
-        evs = Evaluator(backend, n).map(ks, cs)
+        for i in range(0, n, batch):
+            evs += evaluator.map(ks[i:i + batch], cs[i:i + batch])
+            if progress is not None:
+                progress(len(evs))
     finally:
         backend.close()
     return ToleranceReport(n, stiffness_tol, damping_tol,

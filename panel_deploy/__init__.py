@@ -5,7 +5,10 @@ The core (this package minus :mod:`panel_deploy.nodes`) never imports rclpy.
 Data flows one way: scene -> model -> simulation -> collision -> optimisation.
 """
 
+from ._numba_cache import configure as _configure_numba_cache
 from .errors import PanelDeployError
+
+_configure_numba_cache()  # before any kernel module is imported
 
 __version__ = "0.1.0"
 __all__ = ["PanelDeployError", "__version__"]

@@ -175,15 +175,19 @@ def _dopri5_step(P, y, f, h, K):
     return y1, err
 
 
-#: Compiled schemes (``compiled_loop``'s ``scheme``).
+#: Compiled schemes (keys of ``COMPILED_LOOPS``).
 DOPRI5, ROS34PW2 = 0, 1
 SCHEMES = {"dopri5": DOPRI5, "ros34pw2": ROS34PW2}
 
 
-@njit(cache=True)
-def compiled_loop(P, t_eval, Y, j, j_stop, carry, counts, rtol, atol, max_step, locate,
-                  max_steps, gap_limit, scheme):
-    """Adaptive integration with the whole loop compiled, resumable.
+def _compiled_loop(scheme):
+    """The compiled loop of one scheme: ``loop(P, t_eval, Y, j, j_stop, carry,
+    counts, rtol, atol, max_step, locate, max_steps, gap_limit)``.
+
+    One loop per scheme, not one with both: ``implicit`` is a constant of
+    each, so numba prunes the other scheme's branches before typing them, and
+    a run compiles only its own stepper (compile time is most of a first
+    run; numba caches each closure apart, by the value of ``implicit``).
 
     DOPRI5 steps exactly onto every t_eval[j]. ROS34PW2 steps freely and fills
     the samples it passes by cubic Hermite interpolation of y and f at the step
@@ -216,118 +220,129 @@ def compiled_loop(P, t_eval, Y, j, j_stop, carry, counts, rtol, atol, max_step, 
     collapse, 2 non-finite state, 3 gap above gap_limit, 4 max_steps (rows of
     Y from j on stay NaN).
     """
-    N = Y.shape[1]
-    n = P.n
-    s = t_eval.shape[0]
-    t = carry[0]
-    h = carry[1]
-    y = carry[2:2 + N].copy()
-    f = carry[2 + N:2 + 2 * N].copy()
-    nfev = counts[0]
-    njev = counts[1]
-    nlu = counts[2]
-    nsteps = counts[3]
-    nswitches = counts[4]
-    landed = counts[5] != 0  # the last step was shortened onto a switch: do not locate in the next
-    rejected = counts[6] != 0  # the last attempt was rejected by the error test
     implicit = scheme == ROS34PW2
-    expo = -1.0 / (rosenbrock.ERROR_ORDER if implicit else 5)
-    if nfev == 0:
-        f = kernels.rhs(P, y)
-        nfev = 1
-        # Hairer, Norsett & Wanner (II.4) starting step
-        sc = np.empty(N)
-        for i in range(N):
-            sc[i] = atol + rtol * abs(y[i])
-        d0 = math.sqrt(np.mean((y / sc) ** 2))
-        d1 = math.sqrt(np.mean((f / sc) ** 2))
-        h = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-        h = min(h, max_step)
-    K = np.empty((7, N))
-    A = np.zeros((n, n))
-    B = np.zeros((n, n))
-    fresh = False  # A, B were taken at the current y (a rejected step keeps them)
-    status = 0
-    code = 0
-    while j < s:
-        if not np.all(np.isfinite(f)):
-            status, code = -1, 2
-            break
-        if j > j_stop:
-            break
-        target = t_eval[-1] if implicit else t_eval[j]
-        step = min(h, max_step, target - t)
-        lands = step == target - t
-        if implicit:
-            if not fresh:
-                A, B, ok = kernels.stiff_jacobian(P, y)
-                njev += 1
-                fresh = True
-            y1, err, ok = rosenbrock.step(P, y, f, step, A, B, K)
-            nfev += 3
-            nlu += 1
-        else:
-            y1, err = _dopri5_step(P, y, f, step, K)
-            nfev += 6
-        en = _rms_norm(err, y, y1, rtol, atol)
-        if not math.isfinite(en):
-            h = 0.2 * step
-        elif en > 1.0:
-            h = step * max(0.2, 0.9 * en ** expo)
-            rejected = True
-        else:
-            frac = first_switch(n, y, y1, step, atol) if locate and not landed else 2.0
-            if EDGE < frac < 1.0 - EDGE:
-                h = frac * step
-                nswitches += 1
-                landed = True
-                continue
-            landed = False
-            t_old, y_old, f_old = t, y, f
-            t = target if lands else t + step
-            y = y1
+
+    @njit(cache=True)
+    def loop(P, t_eval, Y, j, j_stop, carry, counts, rtol, atol, max_step, locate,
+             max_steps, gap_limit):
+        N = Y.shape[1]
+        n = P.n
+        s = t_eval.shape[0]
+        t = carry[0]
+        h = carry[1]
+        y = carry[2:2 + N].copy()
+        f = carry[2 + N:2 + 2 * N].copy()
+        nfev = counts[0]
+        njev = counts[1]
+        nlu = counts[2]
+        nsteps = counts[3]
+        nswitches = counts[4]
+        # the last step was shortened onto a switch: do not locate in the next
+        landed = counts[5] != 0
+        rejected = counts[6] != 0  # the last attempt was rejected by the error test
+        expo = -1.0 / (rosenbrock.ERROR_ORDER if implicit else 5)
+        if nfev == 0:
+            f = kernels.rhs(P, y)
+            nfev = 1
+            # Hairer, Norsett & Wanner (II.4) starting step
+            sc = np.empty(N)
+            for i in range(N):
+                sc[i] = atol + rtol * abs(y[i])
+            d0 = math.sqrt(np.mean((y / sc) ** 2))
+            d1 = math.sqrt(np.mean((f / sc) ** 2))
+            h = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+            h = min(h, max_step)
+        K = np.empty((7, N))
+        A = np.zeros((n, n))
+        B = np.zeros((n, n))
+        fresh = False  # A, B were taken at the current y (a rejected step keeps them)
+        status = 0
+        code = 0
+        while j < s:
+            if not np.all(np.isfinite(f)):
+                status, code = -1, 2
+                break
+            if j > j_stop:
+                break
+            target = t_eval[-1] if implicit else t_eval[j]
+            step = min(h, max_step, target - t)
+            lands = step == target - t
             if implicit:
-                f = kernels.rhs(P, y)
-                nfev += 1
-                fresh = False
-                while j < s and t_eval[j] <= t:
-                    frac = (t_eval[j] - t_old) / step
-                    for i in range(N):
-                        Y[j, i] = _hermite(y_old[i], f_old[i], y[i], f[i], step, frac)
-                    j += 1
+                if not fresh:
+                    A, B, ok = kernels.stiff_jacobian(P, y)
+                    njev += 1
+                    fresh = True
+                y1, err, ok = rosenbrock.step(P, y, f, step, A, B, K)
+                nfev += 3
+                nlu += 1
             else:
-                f = K[6].copy()
-                if lands:
-                    Y[j] = y
-                    j += 1
-            nsteps += 1
-            if gap_limit > 0.0 and max_gap(P, y) > gap_limit:
-                status, code = -1, 3
+                y1, err = _dopri5_step(P, y, f, step, K)
+                nfev += 6
+            en = _rms_norm(err, y, y1, rtol, atol)
+            if not math.isfinite(en):
+                h = 0.2 * step
+            elif en > 1.0:
+                h = step * max(0.2, 0.9 * en ** expo)
+                rejected = True
+            else:
+                frac = first_switch(n, y, y1, step, atol) if locate and not landed else 2.0
+                if EDGE < frac < 1.0 - EDGE:
+                    h = frac * step
+                    nswitches += 1
+                    landed = True
+                    continue
+                landed = False
+                t_old, y_old, f_old = t, y, f
+                t = target if lands else t + step
+                y = y1
+                if implicit:
+                    f = kernels.rhs(P, y)
+                    nfev += 1
+                    fresh = False
+                    while j < s and t_eval[j] <= t:
+                        frac = (t_eval[j] - t_old) / step
+                        for i in range(N):
+                            Y[j, i] = _hermite(y_old[i], f_old[i], y[i], f[i], step, frac)
+                        j += 1
+                else:
+                    f = K[6].copy()
+                    if lands:
+                        Y[j] = y
+                        j += 1
+                nsteps += 1
+                if gap_limit > 0.0 and max_gap(P, y) > gap_limit:
+                    status, code = -1, 3
+                    break
+                if nsteps >= max_steps:
+                    status, code = -1, 4
+                    break
+                grow = min(10.0, 0.9 * en ** expo) if en > 0 else 10.0
+                # After a rejection do not grow again at once (Hairer & Wanner II.4):
+                # the error estimate just said the step was too long.
+                h = step * (min(1.0, grow) if rejected else grow)
+                rejected = False
+                continue
+            if h < 10.0 * np.finfo(np.float64).eps * max(1.0, abs(t)):
+                status, code = -1, 1
                 break
-            if nsteps >= max_steps:
-                status, code = -1, 4
-                break
-            grow = min(10.0, 0.9 * en ** expo) if en > 0 else 10.0
-            # After a rejection do not grow again at once (Hairer & Wanner II.4):
-            # the error estimate just said the step was too long.
-            h = step * (min(1.0, grow) if rejected else grow)
-            rejected = False
-            continue
-        if h < 10.0 * np.finfo(np.float64).eps * max(1.0, abs(t)):
-            status, code = -1, 1
-            break
-    carry[0] = t
-    carry[1] = h
-    carry[2:2 + N] = y
-    carry[2 + N:2 + 2 * N] = f
-    counts[0] = nfev
-    counts[1] = njev
-    counts[2] = nlu
-    counts[3] = nsteps
-    counts[4] = nswitches
-    counts[5] = 1 if landed else 0
-    counts[6] = 1 if rejected else 0
-    return j, status, code
+        carry[0] = t
+        carry[1] = h
+        carry[2:2 + N] = y
+        carry[2 + N:2 + 2 * N] = f
+        counts[0] = nfev
+        counts[1] = njev
+        counts[2] = nlu
+        counts[3] = nsteps
+        counts[4] = nswitches
+        counts[5] = 1 if landed else 0
+        counts[6] = 1 if rejected else 0
+        return j, status, code
+
+    return loop
+
+
+#: The compiled loop of each scheme (see :func:`_compiled_loop`).
+COMPILED_LOOPS = {k: _compiled_loop(k) for k in (DOPRI5, ROS34PW2)}
 
 
 _CODES = {1: "step size collapsed", 2: "non-finite state or derivative",
@@ -371,8 +386,10 @@ def _leading_finite(rows, done, upto):
 
 
 def integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit, scheme, stops):
-    """:func:`compiled_loop` called once per block of samples (see :func:`integrate_blocks`)."""
+    """The scheme's compiled loop called once per block of samples (see
+    :func:`integrate_blocks`)."""
     scheme = choose_scheme(P, y0) if scheme == "auto" else scheme
+    loop = COMPILED_LOOPS[SCHEMES[scheme]]
     s, N = len(t_eval), len(y0)
     Y = np.full((s, N), np.nan)
     Y[0] = y0
@@ -385,9 +402,9 @@ def integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit, scheme, st
     for stop in stops:
         status = code = 0
         if j <= stop:  # else ROS34PW2 filled this block already
-            j, status, code = compiled_loop(
+            j, status, code = loop(
                 P, t_eval, Y, j, int(stop), carry, counts, settings.rtol, settings.atol,
-                settings.max_step, settings.events, max_steps, gap_limit, SCHEMES[scheme])
+                settings.max_step, settings.events, max_steps, gap_limit)
         done = _leading_finite(Y, done, j)
         hi = min(stop + 1, done) if status == 0 else done
         msg = "reached t_end" if status == 0 else (

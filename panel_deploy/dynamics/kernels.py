@@ -33,7 +33,12 @@ import math
 import numpy as np
 from numba import njit
 
+from .._numba_cache import announce_compilation
 from .pack import EXACT, PENALTY, TREE
+
+# Every kernel module imports this one (collision's through dynamics), so the
+# notice is in place before anything compiles.
+announce_compilation()
 
 PI = math.pi
 #: The zero 3-vector, for wrenches without a torque or a force.

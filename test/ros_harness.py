@@ -27,7 +27,7 @@ def executable(name: str) -> str:
     return str(path)
 
 
-def wait_for(condition, timeout=20.0, what="condition"):
+def wait_for(condition, timeout=60.0, what="condition"):
     end = time.monotonic() + timeout
     while not condition():
         if time.monotonic() > end:
@@ -61,7 +61,7 @@ class Client:
             self.node.create_subscription(msg_type, topic, self.received[topic].append, qos)
         return self.received[topic]
 
-    def call(self, srv_type, service, request=None, timeout=20.0):
+    def call(self, srv_type, service, request=None, timeout=60.0):
         # Clients are kept: destroying one under a spinning executor can block.
         key = (srv_type, service)
         if key not in self._clients:

@@ -32,9 +32,10 @@ def test_cache_dir_choice(tmp_path, monkeypatch):
 # The package folder made read-only as far as the process can tell (the tests may
 # run as root, who can write anywhere): the kernels must cache to the user folder.
 READ_ONLY = """
-import os, pathlib
+import importlib.util, os, pathlib
 real_access = os.access
-pkg = pathlib.Path({pkg!r})
+# the package this process imports (the installed one, when the tests run from a checkout)
+pkg = pathlib.Path(importlib.util.find_spec("panel_deploy").origin).parent
 os.access = lambda p, m, **kw: False if pathlib.Path(p) == pkg else real_access(p, m, **kw)
 import numba
 from panel_deploy.dynamics import kernels
@@ -44,7 +45,7 @@ print(kernels.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5)[0])
 
 
 def test_read_only_package_caches_in_user_folder(tmp_path):
-    code = READ_ONLY.format(pkg=str(_numba_cache.PACKAGE_DIR))
+    code = READ_ONLY
     # not the working directory, whose panel_deploy/ would shadow the package
     xdg = {"XDG_CACHE_HOME": str(tmp_path / "xdg")}
     out = _run(code, xdg, tmp_path)

@@ -1,7 +1,7 @@
 """Collision check cost: per sample, per pair, growth with panel count, and
 against the simulation it checks. Prints medians (wall clock, 2 shared cores).
 
-    python bench/bench_collision.py [--no-sim] [--repeats N]
+    python bench/bench_collision.py [--no-sim] [--stream] [--repeats N]
 
 Models: the paper's 4x4 scene (12 bodies, 54 pairs) and synthetic R x C
 arrays of unit panels hinged along a snake path (a tree), at random angles
@@ -11,6 +11,12 @@ Variants per sample: "all pairs" (one python-fcl distance call per pair),
 where the sample minimum could be; the production path), and "FCL manager"
 (DynamicAABBTreeCollisionManager.update + one distance() call: it returns
 only the global minimum, not the vector D_j).
+
+Streaming (``--stream`` runs only this): the paper deployment fed one joint
+state at a time to StreamCheck, as the live node does, at 1 kHz (an encoder
+rate, 2 s) and 200 Hz (0.6 s): per-update median, mean, p99 and max, and
+the worst delay of a sample arriving at its stamp behind the updates before
+it (below the period when the check keeps up).
 """
 
 from __future__ import annotations
@@ -105,11 +111,15 @@ def per_sample(model, theta_list, repeats):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--no-sim", action="store_true", help="skip the paper-scene simulation")
+    ap.add_argument("--stream", action="store_true", help="only the streaming case")
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
     rng = np.random.default_rng(0)
 
     scene = load_scene(SCENE)
+    if args.stream:
+        stream_costs(scene, args.repeats)
+        return
     paper = build_model(scene)
     print("per-sample cost of D_j (median of", args.repeats, "runs), microseconds")
     print(f"{'model':24s} {'bodies':>6s} {'pairs':>6s} {'all pairs':>10s} {'per pair':>9s} "
@@ -135,6 +145,43 @@ def main():
     for label, model in (("paper scene", paper),
                          ("paper scene, c/k 0.19 s", paper.with_stiffness(k, 0.19 * k))):
         check_costs(label, model, scene, args.repeats)
+    stream_costs(scene, args.repeats)
+
+
+def stream_costs(scene, repeats):
+    """Per-update cost of StreamCheck on the paper deployment at 1 kHz and 200 Hz, ms."""
+    from panel_deploy.dynamics import simulate
+    from panel_deploy.live import DynamicsParameters, StreamCheck, configure
+
+    print("\nstreaming check, refine on, per update (median of", max(1, repeats // 2), "runs), ms")
+    print(f"{'stream':22s} {'samples':>7s} {'median':>7s} {'mean':>7s} {'p99':>7s} {'max':>7s} {'delay':>7s}")
+    for rate, t_end in ((1000.0, 0.0), (200.0, 0.6)):
+        streamed, model = configure(scene, DynamicsParameters(rate_hz=rate, t_end=t_end))
+        result = simulate(model, streamed.simulation)
+        settings = CollisionSettings.from_scene(streamed)
+        StreamCheck(model, settings).update(result.t[0], result.theta[0], result.omega[0])  # compile
+        runs = []
+        for _ in range(max(1, repeats // 2)):
+            check = StreamCheck(model, settings)
+            d = np.empty(len(result.t))
+            for j in range(len(result.t)):
+                t0 = time.perf_counter()
+                check.update(result.t[j], result.theta[j], result.omega[j])
+                d[j] = time.perf_counter() - t0
+            runs.append((np.median(d), d.mean(), np.percentile(d, 99), d.max(), worst_delay(result.t, d)))
+        med = np.median(np.array(runs), axis=0) * 1e3
+        label = f"{rate:g} Hz, {result.t[-1]:g} s"
+        print(f"{label:22s} {len(result.t):7d} " + " ".join(f"{x:7.3f}" for x in med))
+
+
+def worst_delay(t, d):
+    """Largest time (s) from a sample's arrival at its stamp t to the end of its
+    update, updates served in order taking d (s) each."""
+    free, worst = -math.inf, 0.0
+    for tj, dj in zip(t, d):
+        free = max(free, tj) + dj
+        worst = max(worst, free - tj)
+    return worst
 
 
 def check_costs(label, model, scene, repeats):

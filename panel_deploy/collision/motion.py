@@ -81,11 +81,12 @@ class PairSpeedBound:
         self.points = np.array([model.hinges[h].point - model.bodies[model.hinges[h].body_a].flat_position
                                 for h in model.joints]).reshape(-1, 3)
         self.axes = np.array([model.hinges[h].axis for h in model.joints]).reshape(-1, 3)
+        self._every = np.ones((model.n_bodies, len(model.joints)), dtype=bool)
 
     def radii(self, rotation, position) -> np.ndarray:
         """Largest distance (m) of each body's corners from each hinge line, (nb, n_coords)."""
-        return _hinge_radii(np.asarray(rotation, dtype=float), np.asarray(position, dtype=float),
-                            self.half, self.parents, self.points, self.axes)
+        return hinge_radii_of(np.asarray(rotation, dtype=float), np.asarray(position, dtype=float),
+                              self.half, self.parents, self.points, self.axes, self._every)
 
     def __call__(self, rate_bound, h, radii_a, radii_b, rows) -> np.ndarray:
         """Largest |d sd/dt| (m/s) over an interval of length h (s) of the pairs ``rows``.
@@ -106,12 +107,29 @@ class PairSpeedBound:
 # arrays they cost more than the exact distances they decide on.
 
 @njit(cache=True)
-def _hinge_radii(rotation, position, half, parents, points, axes):
-    """:meth:`PairSpeedBound.radii` (same shapes and units)."""
+def hinge_radii_of(rotation, position, half, parents, points, axes, need):
+    """:meth:`PairSpeedBound.radii` where ``need`` (nb, n_coords) is True, 0 elsewhere.
+
+    A bisection step needs the radii of the open pairs' bodies about their
+    paths' hinges only (:func:`needed_radii`); each entry is computed as in
+    the full table, to the bit.
+    """
     nb, n = rotation.shape[0], parents.shape[0]
     out = np.zeros((nb, n))
+    # The corners' offsets from their body's centroid, term by term, shared by every hinge.
+    offset = np.empty((nb, 8, 3, 3))
+    for b in range(nb):
+        if not need[b].any():
+            continue
+        for m in range(8):
+            for i in range(3):
+                for j in range(3):
+                    sign = 1.0 if (m >> (2 - j)) & 1 else -1.0
+                    offset[b, m, i, j] = rotation[b, i, j] * sign * half[b, j]
     corner, point, axis = np.empty(3), np.empty(3), np.empty(3)
     for k in range(n):
+        if not need[:, k].any():
+            continue
         R = rotation[parents[k]]
         for i in range(3):
             point[i] = position[parents[k], i]
@@ -120,17 +138,32 @@ def _hinge_radii(rotation, position, half, parents, points, axes):
                 point[i] += R[i, j] * points[k, j]
                 axis[i] += R[i, j] * axes[k, j]
         for b in range(nb):
+            if not need[b, k]:
+                continue
             far = 0.0
             for m in range(8):
                 for i in range(3):
                     corner[i] = position[b, i] - point[i]
                     for j in range(3):
-                        sign = 1.0 if (m >> (2 - j)) & 1 else -1.0
-                        corner[i] += rotation[b, i, j] * sign * half[b, j]
+                        corner[i] += offset[b, m, i, j]
                 along = corner[0] * axis[0] + corner[1] * axis[1] + corner[2] * axis[2]
                 far = max(far, corner[0] ** 2 + corner[1] ** 2 + corner[2] ** 2 - along * along)
             out[b, k] = math.sqrt(far)
     return out
+
+
+@njit(cache=True)
+def needed_radii(rows, coords, mask, a, b, nb, n):
+    """The (body, coordinate) entries, (nb, n) bool, of the radii that
+    :func:`_speed_bound` reads for the pairs ``rows``."""
+    need = np.zeros((nb, n), dtype=np.bool_)
+    for i in range(rows.shape[0]):
+        p = rows[i]
+        for k in range(coords.shape[1]):
+            if mask[p, k] != 0.0:
+                need[a[p], coords[p, k]] = True
+                need[b[p], coords[p, k]] = True
+    return need
 
 
 @njit(cache=True)
@@ -193,6 +226,12 @@ class HermiteSegment:
         theta = self._th0 + s * (C + s * (B / 2.0 + s * A / 3.0))
         omega = (C + s * (B + s * A)) / self.h
         return theta, omega
+
+    @property
+    def coefficients(self) -> tuple:
+        """``(t0, h, theta0, A, B, C)``: start (s), length (s), angles at the start
+        (rad) and d theta / ds = A s^2 + B s + C (rad) on s = (t - t0) / h in [0, 1]."""
+        return self.t0, self.h, np.ascontiguousarray(self._th0), self._A, self._B, self._C
 
     def rate_bound(self, ta, tb) -> np.ndarray:
         """max |omega| over [ta, tb] of every coordinate, rad/s, shape (n,)."""

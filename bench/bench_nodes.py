@@ -87,7 +87,9 @@ def monitor_cost(rate_hz=1000.0):
             for j in range(len(result.t))]
     context = rclpy.Context()
     rclpy.init(context=context)
-    node = CollisionMonitorNode(context=context)
+    # A name of its own: the node process of the live part below owns "collision_monitor".
+    node = CollisionMonitorNode(context=context,
+                                cli_args=["--ros-args", "-r", "__node:=collision_monitor_bench"])
     try:
         node._on_model(messages.string(open(resolve_scene("paper_4x4")).read()))
         times = np.empty(len(msgs))
@@ -113,17 +115,26 @@ def monitor_live(client, msgs, rate_hz=1000.0):
     client.trigger("/collision_monitor/reset")
     start = time.perf_counter()
     for j, msg in enumerate(msgs):
-        time.sleep(max(0.0, start + j / rate_hz - time.perf_counter()))
+        ahead = start + j / rate_hz - time.perf_counter()
+        if ahead > 0.002:  # sleep in steps the scheduler can keep: the rate holds on average
+            time.sleep(ahead)
         publisher.publish(msg)
     sent = time.perf_counter()
 
-    def caught_up():
-        return any(kv.key == "samples" and kv.value == str(len(msgs))
-                   for d in diagnostics for s in d.status for kv in s.values)
-    wait_for(caught_up, timeout=300, what="the monitor to catch up")
+    def checked():
+        return max([int(kv.value) for d in diagnostics for st in d.status for kv in st.values
+                    if kv.key == "samples"] or [0])
+
+    # Until every sample is checked, or nothing moved for 10 s (then say how many were).
+    last, still = -1, time.perf_counter()
+    while checked() < len(msgs) and time.perf_counter() - still < 10.0:
+        if checked() != last:
+            last, still = checked(), time.perf_counter()
+        time.sleep(0.1)
     lag = time.perf_counter() - sent
-    print(f"  live, node process fed at {rate_hz:g} Hz for {sent - start:.2f} s: verdict on every "
-          f"sample {lag:.2f} s after the last message (verdicts go out every 0.5 s)")
+    print(f"  live, node process fed at {rate_hz:g} Hz for {sent - start:.2f} s: {checked()} of "
+          f"{len(msgs)} samples checked, the last {lag:.2f} s after the last message "
+          f"(verdicts go out every 0.5 s)")
 
 
 def event_latency(client):

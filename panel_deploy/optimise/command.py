@@ -136,5 +136,5 @@ def next_steps(result, out) -> str:
     if not result.problem.damping_variable:
         steps.append("letting the search choose one c/k for all hinges "
                      "(--set \"optimisation.damping_ratio_bounds=[lo,hi]\", s), which widens a "
-                     "thin feasible set (README: the paper scene)")
+                     "thin feasible set (docs/findings.md, optimisation and damping)")
     return "no feasible K: try " + "; or ".join(steps)

@@ -156,17 +156,20 @@ def configure(scene: Scene, params: DynamicsParameters) -> tuple:
     return scene, apply_stiffness(model, params.stiffness, ratio)
 
 
-def scene_yaml(scene: Scene, stiffness=None) -> str:
-    """The scene as YAML text, as ``/panel_deploy/model`` carries it.
+def scene_yaml(scene: Scene, model: Model | None = None) -> str:
+    """The scene as YAML text, as ``/panel_deploy/model`` and recordings carry it.
 
-    ``stiffness`` (k per hinge of the scene's model, N m/rad), when given,
-    becomes ``hinges.overrides``, so that readers rebuild the same model.
+    With ``model``, its k per hinge becomes ``hinges.overrides`` and, when
+    every sprung hinge has the same c/k, that ratio ``hinges.damping_ratio``,
+    so that readers rebuild the model's k and c.
     """
     data = dict(scene.data)
-    if stiffness is not None:
-        model = build_model(scene)
+    if model is not None:
         hinges = dict(data.get("hinges") or {})
-        hinges["overrides"] = {h.name: float(k) for h, k in zip(model.hinges, stiffness)}
+        hinges["overrides"] = {h.name: float(h.k) for h in model.hinges}
+        ratios = {h.c / h.k for h in model.hinges if h.k > 0}
+        if ratios and max(ratios) - min(ratios) <= 1e-12 * max(ratios):
+            hinges["damping_ratio"] = float(min(ratios))
         data["hinges"] = hinges
     return yaml.safe_dump(data, sort_keys=False)
 
@@ -292,8 +295,9 @@ def load_array(scene: str, stiffness_file: str = "") -> tuple:
     if not stiffness_file:
         return parsed, model, scene_yaml(parsed)
     k, _ = load_hinges(stiffness_file, model)
-    text = scene_yaml(parsed, k)
-    return scene_from_yaml(text, source=parsed.source), model.with_stiffness(k), text
+    model = model.with_stiffness(k)
+    text = scene_yaml(parsed, model)
+    return scene_from_yaml(text, source=parsed.source), model, text
 
 
 class StreamCheck:

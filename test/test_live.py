@@ -111,7 +111,7 @@ def test_dynamics_parameters_name_the_bad_field(field, value, match):
 def test_scene_text_round_trips_with_stiffness(scene):
     model = build_model(scene)
     k = np.linspace(0.02, 0.13, len(model.hinges))
-    again = build_model(scene_from_yaml(scene_yaml(scene, k)))
+    again = build_model(scene_from_yaml(scene_yaml(scene, model.with_stiffness(k))))
     assert np.allclose(again.stiffness, k)
     with pytest.raises(SceneError, match="not valid YAML"):
         scene_from_yaml("array: [1, 2")

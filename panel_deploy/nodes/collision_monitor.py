@@ -81,7 +81,7 @@ class CollisionMonitorNode(Node):
         if found:
             R, p = forward_kinematics(self.stream.model, theta)
             self.events.publish(messages.diagnostics(
-                t, *(messages.event_status(f"{STATUS}/event", e) for e in found)))
+                t, *(messages.event_status(e) for e in found)))
             self.markers.publish(messages.collision_markers(self.stream.model, found[0], R, p))
             self._publish_verdict()
 

@@ -8,7 +8,6 @@ the URDF (``world`` is the ground panel's flat frame).
 from __future__ import annotations
 
 import array
-import math
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -22,7 +21,7 @@ from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..errors import TrajectoryError
-from ..record.messages import PANEL_COLOUR, status_value
+from ..record.messages import EVENT_STATUS, PANEL_COLOUR, event_fields, status_value
 
 #: Latched topics (/robot_description, /panel_deploy/model, results): a late
 #: subscriber still gets the last message.
@@ -183,12 +182,6 @@ def diagnostics(t: float, *statuses) -> DiagnosticArray:
     return msg
 
 
-def event_status(name: str, event) -> DiagnosticStatus:
-    """One collision event: pair, time (s), approach speed of Eq. (7) (m/s), distance (m)."""
-    speed = event.approach_speed if math.isfinite(event.approach_speed) else event.normal_speed
-    return status(name, ERROR, f"collision between {event.names[0]} and {event.names[1]} "
-                               f"at t = {event.t:.4f} s",
-                  {"pair": list(event.names), "t": event.t, "approach_speed": speed,
-                   "normal_speed": event.normal_speed, "distance": event.distance,
-                   "contact_time": event.contact_time, "sample": event.sample,
-                   "point": [float(x) for x in event.point]})
+def event_status(event) -> DiagnosticStatus:
+    """One collision event's status, as recordings carry it (``event_fields``)."""
+    return status(EVENT_STATUS, ERROR, *event_fields(event))

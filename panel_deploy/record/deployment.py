@@ -18,11 +18,10 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import yaml
 
 from ..collision import CollisionSettings
 from ..export.urdf import model_urdf
-from ..live import Deployment, StreamCheck
+from ..live import Deployment, StreamCheck, scene_yaml
 from ..summary import deployment_summary
 from . import messages as m
 from .cdr import SampleEncoder
@@ -42,20 +41,6 @@ def _batches(samples, size):
             batch = []
     if batch:
         yield batch
-
-
-def recorded_scene_text(scene, model) -> str:
-    """The scene as YAML, with the model's k per hinge as ``hinges.overrides``
-    and, when every sprung hinge has the same c/k, that ratio as
-    ``hinges.damping_ratio``: building it gives back ``model``'s k and c."""
-    data = dict(scene.data)
-    hinges = dict(data.get("hinges") or {})
-    hinges["overrides"] = {h.name: float(h.k) for h in model.hinges}
-    ratios = {h.c / h.k for h in model.hinges if h.k > 0}
-    if ratios and max(ratios) - min(ratios) <= 1e-12 * max(ratios):
-        hinges["damping_ratio"] = float(min(ratios))
-    data["hinges"] = hinges
-    return yaml.safe_dump(data, sort_keys=False)
 
 
 def _relative(source) -> str:
@@ -107,7 +92,7 @@ def record_deployment(path, scene, model):
     """
     settings = CollisionSettings.from_scene(scene)
     sim = scene.simulation
-    scene_text = recorded_scene_text(scene, model)
+    scene_text = scene_yaml(scene, model)
     with Recorder(path) as rec:
         rec.metadata("scene", {"name": scene.name or "", "source": _relative(scene.source),
                                "yaml": scene_text})

@@ -259,15 +259,20 @@ def diagnostics(t: float, *statuses):
     return _T[DIAGNOSTIC_ARRAY](header=_header(t), status=list(statuses))
 
 
-def event_status(event):
-    """One collision event: pair, time (s), approach speed of Eq. (7) (m/s), distance (m)."""
+def event_fields(event) -> tuple:
+    """Message and key-values of one collision event's status: pair, time (s),
+    approach speed of Eq. (7) (m/s), distance (m); the nodes send the same."""
     speed = event.approach_speed if math.isfinite(event.approach_speed) else event.normal_speed
-    return status(EVENT_STATUS, ERROR, f"collision between {event.names[0]} and "
-                                       f"{event.names[1]} at t = {event.t:.4f} s",
-                  {"pair": list(event.names), "t": event.t, "approach_speed": speed,
-                   "normal_speed": event.normal_speed, "distance": event.distance,
-                   "contact_time": event.contact_time, "sample": event.sample,
-                   "point": [float(x) for x in event.point]})
+    return (f"collision between {event.names[0]} and {event.names[1]} at t = {event.t:.4f} s",
+            {"pair": list(event.names), "t": event.t, "approach_speed": speed,
+             "normal_speed": event.normal_speed, "distance": event.distance,
+             "contact_time": event.contact_time, "sample": event.sample,
+             "point": [float(x) for x in event.point]})
+
+
+def event_status(event):
+    """One collision event's DiagnosticStatus (:func:`event_fields`)."""
+    return status(EVENT_STATUS, ERROR, *event_fields(event))
 
 
 def outcome_status(summary: dict):

@@ -1,10 +1,20 @@
 """Where numba keeps the compiled kernels, and one line on stderr while it compiles them.
 
-The kernels are compiled for the machine they run on (``cache=True``): the
-first run compiles and stores them, later runs load them. Numba puts the
-cache in ``__pycache__`` next to the sources; when the package folder is
-not writable (a system or read-only site-packages) :func:`configure` points
-``NUMBA_CACHE_DIR`` at a per-user folder instead, unless the user chose one.
+The kernels are compiled for the machine they run on (``cache=True``) and
+stored in numba's cache, in ``__pycache__`` next to the sources.
+``pip install`` compiles them ahead of time: the build (``setup.py``) runs
+:mod:`panel_deploy._precompile` on the package it is about to install, which
+fills those ``__pycache__`` folders, and marks the package with
+:data:`COMPILED_MARKER`. In a package so marked, :func:`configure` makes numba
+look there first for the package's own kernels (the locator
+:class:`panel_deploy._kernel_locator.CompiledKernelsLocator`), even when
+``NUMBA_CACHE_DIR`` is set: they are part of the installation, not a cache the
+user keeps. Anything the build did not compile, and every kernel of an
+editable or ``colcon --symlink-install`` checkout, compiles on first use and is
+cached as numba does by default. When the package folder is not writable (a
+system or read-only site-packages) numba cannot use it, so :func:`configure`
+points ``NUMBA_CACHE_DIR`` at a per-user folder, unless the user chose one.
+
 This has to happen before the first ``@njit(cache=True)`` is decorated,
 since numba picks a function's cache folder then: ``panel_deploy/__init__``
 calls it before any kernel module is imported.
@@ -18,6 +28,17 @@ from pathlib import Path
 
 #: The installed package folder, where numba caches by default.
 PACKAGE_DIR = Path(__file__).resolve().parent
+
+#: Written by the build once :mod:`panel_deploy._precompile` has filled the caches.
+COMPILED_MARKER = PACKAGE_DIR / "_kernels_compiled"
+
+#: numba's own cache locators, in numba's order.
+NUMBA_LOCATORS = ("UserProvidedCacheLocator,InTreeCacheLocator,UserWideCacheLocator,"
+                  "IPythonCacheLocator,ZipCacheLocator")
+
+#: The locator of the compiled kernels, then numba's; a user's own
+#: ``NUMBA_CACHE_LOCATOR_CLASSES`` is left alone.
+LOCATORS = f"panel_deploy._kernel_locator.CompiledKernelsLocator,{NUMBA_LOCATORS}"
 
 NOTICE = "panel-deploy: compiling kernels for this machine, first run only (a minute or two)"
 
@@ -41,18 +62,25 @@ def chosen_cache_dir(package_dir=PACKAGE_DIR, environ=os.environ) -> str | None:
 
 
 def configure() -> None:
-    """Set ``NUMBA_CACHE_DIR`` to :func:`chosen_cache_dir` when that is not None.
+    """Point numba at the kernels compiled at install, and at a writable cache.
 
-    Through the environment, so that worker processes inherit it; numba's
+    Sets ``NUMBA_CACHE_LOCATOR_CLASSES`` to :data:`LOCATORS` when the package
+    carries :data:`COMPILED_MARKER` (and the user set no locators), and
+    ``NUMBA_CACHE_DIR`` to :func:`chosen_cache_dir` when that is not None.
+    Through the environment, so that worker processes inherit them; numba's
     config is updated too when numba was imported first.
     """
+    chosen = {}
+    if COMPILED_MARKER.exists() and not os.environ.get("NUMBA_CACHE_LOCATOR_CLASSES"):
+        chosen["NUMBA_CACHE_LOCATOR_CLASSES"] = ("CACHE_LOCATOR_CLASSES", LOCATORS)
     path = chosen_cache_dir()
-    if path is None:
-        return
-    os.environ["NUMBA_CACHE_DIR"] = path
+    if path is not None:
+        chosen["NUMBA_CACHE_DIR"] = ("CACHE_DIR", path)
     config = sys.modules.get("numba.core.config")
-    if config is not None:
-        config.CACHE_DIR = path
+    for variable, (attribute, value) in chosen.items():
+        os.environ[variable] = value
+        if config is not None:
+            setattr(config, attribute, value)
 
 
 _announced = False

@@ -1,8 +1,9 @@
-"""Packaging of the ROS side: executables, launch file, params.yaml, package.xml, import rules."""
+"""Packaging: executables, launch file, params.yaml, package.xml, import rules, build requirements."""
 
 import ast
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 from xml.etree import ElementTree
 
@@ -79,3 +80,16 @@ def test_ros_command_without_rclpy_says_how_to_install():
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert proc.stderr.strip().splitlines() == [proc.stderr.strip()]
     assert 'pip install "panel_deploy[ros]"' in proc.stderr
+
+
+def _install_requires():
+    call = next(node for node in ast.walk(ast.parse((ROOT / "setup.py").read_text()))
+                if isinstance(node, ast.Call) and getattr(node.func, "id", "") == "setup")
+    (requires,) = [k.value for k in call.keywords if k.arg == "install_requires"]
+    return ast.literal_eval(requires)
+
+
+def test_build_requires_are_the_run_time_requirements():
+    # the build runs the package to compile its kernels (setup.py, BuildWithKernels)
+    build = tomllib.loads((ROOT / "pyproject.toml").read_text())["build-system"]["requires"]
+    assert sorted(r for r in build if not r.startswith("setuptools")) == sorted(_install_requires())

@@ -1,15 +1,25 @@
-"""First-run behaviour: where numba caches the kernels, the one-line compile notice,
-and that a run compiles only its own integrator."""
+"""First-run behaviour: kernels compiled at install, where numba caches the others,
+the one-line compile notice, and that a run compiles only its own integrator."""
 
 import os
+import shutil
 import subprocess
 import sys
+from pathlib import Path
 
+import pytest
+
+import panel_deploy
 from panel_deploy import _numba_cache
 
 
-def _run(code, env_update, cwd):
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+def _run(code, env_update, cwd, locators=_numba_cache.NUMBA_LOCATORS):
+    """``python -c code``; by default with numba's own locators, for the tests of
+    what happens without kernels compiled at install."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("NUMBA_CACHE_DIR", "NUMBA_CACHE_LOCATOR_CLASSES")}
+    if locators:
+        env["NUMBA_CACHE_LOCATOR_CLASSES"] = locators
     env.update(env_update)
     return subprocess.run([sys.executable, "-c", code], env=env, cwd=cwd,
                           capture_output=True, text=True, timeout=300, check=True)
@@ -89,3 +99,70 @@ def test_dopri5_run_does_not_compile_the_rosenbrock_loop(tmp_path):
     test_dir = os.path.dirname(os.path.abspath(__file__))
     out = _run(ONE_SCHEME, {"PYTHONPATH": test_dir}, tmp_path)
     assert out.stdout.split() == ["1", "0", "0"]
+
+
+TWO_KERNELS = """
+import sys
+from panel_deploy.dynamics import kernels
+from panel_deploy import _numba_cache
+kernels.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5)
+if sys.argv[1:] == ["build"]:
+    _numba_cache.COMPILED_MARKER.write_text("test")
+else:
+    kernels.contact_mode(1.0)
+"""
+
+
+def _package_copy(root):
+    """The package's sources, without caches or marker, as a build starts from them."""
+    source = Path(panel_deploy.__file__).parent
+    shutil.copytree(source, root / "panel_deploy",
+                    ignore=shutil.ignore_patterns("__pycache__", "_kernels_compiled"))
+    return root / "panel_deploy"
+
+
+def test_kernels_compiled_into_the_package_load_without_compiling(tmp_path):
+    package = _package_copy(tmp_path / "site")
+    env = {"PYTHONPATH": str(tmp_path / "site")}
+    # the build: compiles hinge_law into the package's __pycache__, marks the package
+    build = _run(TWO_KERNELS.replace("sys.argv[1:]", '["build"]'), env, tmp_path, locators=None)
+    assert _numba_cache.NOTICE in build.stderr
+    assert (package / "_kernels_compiled").exists()
+    assert list((package / "dynamics" / "__pycache__").glob("kernels.hinge_law-*.nbi"))
+    # a first run with a cache folder of the user's own: hinge_law comes from the
+    # package, contact_mode (not compiled by the build) compiles into the package too
+    user_cache = tmp_path / "user-cache"
+    user_cache.mkdir()
+    first = _run(TWO_KERNELS, {**env, "NUMBA_CACHE_DIR": str(user_cache)}, tmp_path, locators=None)
+    assert first.stderr.count(_numba_cache.NOTICE) == 1
+    assert list((package / "dynamics" / "__pycache__").glob("kernels.contact_mode-*.nbi"))
+    assert not list(user_cache.rglob("*.nbi"))
+    again = _run(TWO_KERNELS, {**env, "NUMBA_CACHE_DIR": str(user_cache)}, tmp_path, locators=None)
+    assert _numba_cache.NOTICE not in again.stderr
+    # without the marker the package's kernels are numba's business: the user's folder
+    (package / "_kernels_compiled").unlink()
+    unmarked = _run(TWO_KERNELS, {**env, "NUMBA_CACHE_DIR": str(user_cache)}, tmp_path,
+                    locators=None)
+    assert _numba_cache.NOTICE in unmarked.stderr
+    assert list(user_cache.rglob("kernels.hinge_law-*.nbi"))
+
+
+def _installed_package(cwd):
+    """The folder of the package an installed ``panel-deploy`` imports."""
+    out = subprocess.run([sys.executable, "-c", "import panel_deploy; print(panel_deploy.__file__)"],
+                         cwd=cwd, capture_output=True, text=True, check=True)
+    return Path(out.stdout.strip()).parent
+
+
+def test_pip_installed_package_runs_paper_scene_without_compiling(tmp_path):
+    installed = _installed_package(tmp_path)
+    if installed == Path(__file__).resolve().parent.parent / "panel_deploy":
+        pytest.skip("editable install: the kernels compile on first use (CI installs with pip)")
+    assert (installed / "_kernels_compiled").exists(), "pip install did not compile the kernels"
+    user_cache = tmp_path / "empty-cache"
+    out = subprocess.run([sys.executable, "-m", "panel_deploy.cli", "simulate", "paper_4x4"],
+                         cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "NUMBA_CACHE_DIR": str(user_cache)}, check=False)
+    assert out.returncode == 0, out.stderr
+    assert _numba_cache.NOTICE not in out.stderr
+    assert not list(user_cache.rglob("*.nbi"))

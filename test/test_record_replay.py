@@ -87,6 +87,16 @@ def test_png_instant_outside_the_recording(recording, tmp_path, capsys):
     assert err.startswith("panel-deploy: error: --at: 7 s is outside the recording") and "\n" not in err
 
 
+def test_viewer_without_a_display_is_refused_before_any_work(tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    # a file that does not exist: the refusal comes before it is read
+    assert main(["replay", str(tmp_path / "absent.mcap")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("panel-deploy: error: --spawn: no display") and "\n" not in err
+    assert "--save" in err
+
+
 def _listening(port):
     """Local addresses with a TCP socket listening on ``port`` (from /proc/net/tcp{,6})."""
     found = []

@@ -22,6 +22,7 @@ The blueprint opens on the 3D view beside the plots and the event log.
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -167,6 +168,13 @@ def replay_command(args) -> int:
     ``--serve`` binds 127.0.0.1 only and runs until Ctrl-C.
     """
     at = _times(args.at) if args.png else None
+    spawn = not (args.save or args.serve or (args.png and not args.spawn))
+    if spawn and sys.platform.startswith("linux") and not (
+            os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        # rerun would try for ~20 s to reach a viewer that cannot start
+        raise SceneError("--spawn", "no display for the rerun viewer (DISPLAY is not set); write "
+                                    "a file with --save OUT.rrd, serve with --serve or render "
+                                    "--png STRIP.png")
     d = read_deployment(args.recording, args.scene)
     if args.png:
         from .strip import render_strip

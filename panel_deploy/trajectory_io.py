@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .dynamics.result import SimulationResult
+from .dynamics.result import SimulationResult, Status
 from .errors import SceneError, TrajectoryError
 from .validate import load_yaml, yaml_problem
 
@@ -97,9 +97,16 @@ def load_trajectory(path):
     except yaml.YAMLError as e:
         raise TrajectoryError(f"{path}: stored scene is invalid ({yaml_problem(e)})") from None
     energy = {k[len("energy_"):]: v for k, v in data.items() if k.startswith("energy_")}
+    status = _scalar(path, data, "status", "i", 0)
+    if status not in Status._value2member_map_:
+        raise TrajectoryError(f"{path}: status: {status} is not a simulation status "
+                              f"({', '.join(f'{s.value} {s.name}' for s in Status)})")
+    success = bool(_scalar(path, data, "success", "b", True))
+    if success != (status == Status.REACHED_T_END):
+        raise TrajectoryError(f"{path}: success {success} contradicts status {status}")
     result = SimulationResult(**{k: data[k] for k in _ARRAYS}, energy=energy,
-                              success=bool(_scalar(path, data, "success", "b", True)),
-                              status=int(_scalar(path, data, "status", "i", 0)),
+                              success=success,
+                              status=Status(status),
                               message=str(_scalar(path, data, "message", "U", "")),
                               method=str(_scalar(path, data, "method", "U", "")))
     return result, scene, data["stiffness"]

@@ -328,6 +328,8 @@ def test_collide_checks_the_stored_poses_and_scene(capsys, tmp_path, trajectory)
     ({"t": np.array(["a", "b"])}, "t: expected a 1-d array of numbers"),
     ({"scene_yaml": np.array("array: {}\narray: {}\n")}, "duplicate key 'array'"),
     ({"stiffness": np.zeros(3)}, "stiffness has shape (3,)"),
+    ({"status": np.array(-7)}, "status: -7 is not a simulation status"),
+    ({"status": np.array(-2)}, "success True contradicts status -2"),
 ])
 def test_malformed_trajectory_arrays_are_one_line(capsys, tmp_path, trajectory, change, expected):
     line = one_line_error(capsys, ["collide", str(rewrite(trajectory, tmp_path / "x.npz", **change))])

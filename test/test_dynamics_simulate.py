@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from panel_deploy.build import build_model
-from panel_deploy.dynamics import simulate, simulate_segments
+from panel_deploy.dynamics import Status, simulate, simulate_segments
 from panel_deploy.dynamics.result import concatenate
 from panel_deploy.errors import ModelError
 from panel_deploy.kinematics import axis_rotation
@@ -107,7 +107,7 @@ def test_dissipated_energy_closes_balance(closure):
 def test_step_budget_failure_returns_finite_partial_result():
     model = plate_on_hinge()
     r = simulate(model, SimulationSection(t_end=1.0, method="compiled", samples=101), max_steps=20)
-    assert not r.success and r.status == -1
+    assert not r.success and r.status == Status.BUDGET_EXHAUSTED
     assert "budget" in r.message
     assert 1 <= len(r.t) < 101
     assert r.theta.shape == (len(r.t), 1) and r.position.shape[0] == len(r.t)
@@ -120,9 +120,28 @@ def test_gap_blow_up_stops_the_run(method):
     state = State(0.0, np.full(model.n_coords, 0.3), np.zeros(model.n_coords))
     r = simulate(model, SimulationSection(t_end=0.1, method=method, samples=11), state,
                  gap_limit=1e-9)
-    assert not r.success and r.status == -1
+    assert not r.success and r.status == Status.GAP_EXCEEDED
     assert "gap" in r.message
     assert np.all(np.isfinite(r.theta)) and np.all(np.isfinite(r.energy["kinetic"]))
+
+
+def test_step_size_collapse_has_its_own_status():
+    # a tolerance below round-off: the first step cannot be accepted
+    r = simulate(plate_on_hinge(), SimulationSection(t_end=0.1, method="compiled", rtol=1e-30,
+                                                     atol=1e-30, samples=11))
+    assert not r.success and r.status == Status.STEP_COLLAPSE
+    assert np.all(np.isfinite(r.theta))
+
+
+@pytest.mark.parametrize("method, k", [("compiled", 1e308), ("RK45", 1e308), ("Radau", 1e300)])
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # scipy's own step-size guesses overflow
+def test_overflowing_forces_end_as_non_finite(method, k):
+    # the spring torque k theta overflows at the start (compiled, RK45) or
+    # in Radau's Newton iteration: a status, never an exception or NaN samples
+    r = simulate(plate_on_hinge(k=k), SimulationSection(t_end=0.1, method=method, samples=11),
+                 State(0.0, np.array([1.0]), np.zeros(1)))
+    assert not r.success and r.status == Status.NON_FINITE
+    assert len(r.t) >= 1 and np.all(np.isfinite(r.theta))
 
 
 def test_bad_state_is_misuse():
@@ -246,6 +265,6 @@ def test_paper_segments_fail_where_simulate_fails(paper, method, scheme, t_end, 
     assert 8 < len(whole.t) < 101  # it fails after the first block
     blocks = list(simulate_segments(model, settings, segment_samples=7, max_steps=max_steps,
                                     compiled_scheme=scheme))
-    assert not blocks[-1].success and blocks[-1].status == -1
+    assert not blocks[-1].success and blocks[-1].status == Status.BUDGET_EXHAUSTED
     assert sum(b.nsteps for b in blocks) == whole.nsteps == max_steps
     assert_same_run(blocks, whole)

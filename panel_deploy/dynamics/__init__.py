@@ -8,9 +8,8 @@ that stream it or stop early); reports from a result: ``hinge_release_report``, 
 """
 
 from .report import energy_balance_error, hinge_release_report, summary
-from .result import SimulationResult
+from .result import SimulationResult, Status
 from .simulate import default_gap_limit, simulate, simulate_segments
 
-__all__ = ["SimulationResult", "simulate", "simulate_segments", "default_gap_limit",
-           "hinge_release_report",
-           "summary", "energy_balance_error"]
+__all__ = ["SimulationResult", "Status", "default_gap_limit", "energy_balance_error",
+           "hinge_release_report", "simulate", "simulate_segments", "summary"]

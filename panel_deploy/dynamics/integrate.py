@@ -29,6 +29,7 @@ import numpy as np
 from numba import njit
 
 from . import kernels, rosenbrock
+from .result import Status
 
 #: scipy.integrate's OdeSolver classes by name. scipy.integrate is imported
 #: by the runs that use it: importing it costs every command ~0.4 s.
@@ -42,8 +43,9 @@ EDGE = 1e-3
 class Integration:
     """Raw output of an integrator.
 
-    ``y`` (s_done, N) holds the samples reached; ``status`` 0 = t_end reached,
-    -1 = failure with ``message``; ``scheme`` the compiled scheme used.
+    ``y`` (s_done, N) holds the samples reached; ``status`` a
+    :class:`~panel_deploy.dynamics.result.Status` (0 = t_end reached, negative
+    = failure with ``message``); ``scheme`` the compiled scheme used.
     """
 
     y: np.ndarray
@@ -216,8 +218,9 @@ def _compiled_loop(scheme):
 
     Returns (j, status, code): j the next sample to fill; status 0 ok
     (j > j_stop, or j == s at the end), -1 failure with code: 1 step
-    collapse, 2 non-finite state, 3 gap above gap_limit, 4 max_steps (rows of
-    Y from j on stay NaN).
+    collapse, 2 non-finite state, 3 gap above gap_limit, 4 max_steps, the
+    negated :class:`~panel_deploy.dynamics.result.Status` (rows of Y from j
+    on stay NaN).
     """
     implicit = scheme == ROS34PW2
 
@@ -344,8 +347,11 @@ def _compiled_loop(scheme):
 COMPILED_LOOPS = {k: _compiled_loop(k) for k in (DOPRI5, ROS34PW2)}
 
 
-_CODES = {1: "step size collapsed", 2: "non-finite state or derivative",
-          3: "loop-closure gap exceeded the limit", 4: "step budget exhausted"}
+#: The compiled loop's failure codes 1-4 are minus these statuses.
+_FAILURES = {Status.STEP_COLLAPSE: "step size collapsed",
+             Status.NON_FINITE: "non-finite state or derivative",
+             Status.GAP_EXCEEDED: "loop-closure gap exceeded the limit",
+             Status.BUDGET_EXHAUSTED: "step budget exhausted"}
 
 
 #: ``choose_scheme`` takes ROS34PW2 when DOPRI5's stability limit on the
@@ -357,7 +363,7 @@ def stiffness(P, y) -> float:
     """Spectral radius (1/s) of the stiff part of the Jacobian at state y."""
     n = P.n
     A, B, ok = kernels.stiff_jacobian(P, y)
-    if not ok:
+    if not (ok and np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
         return math.inf
     J = np.block([[np.zeros((n, n)), np.eye(n)], [A, B]])
     return float(np.abs(np.linalg.eigvals(J)).max())
@@ -404,10 +410,12 @@ def integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit, scheme, st
             j, status, code = loop(
                 P, t_eval, Y, j, int(stop), carry, counts, settings.rtol, settings.atol,
                 settings.max_step, settings.events, max_steps, gap_limit)
+        status = Status(-code if status else 0)
         done = _leading_finite(Y, done, j)
         hi = min(stop + 1, done) if status == 0 else done
         msg = "reached t_end" if status == 0 else (
-            f"{_CODES[code]} at t = {t_eval[done - 1]:.6g} s (last sample); integration stopped")
+            f"{_FAILURES[status]} at t = {t_eval[done - 1]:.6g} s (last sample); "
+            "integration stopped")
         nfev, njev, nlu, nsteps, nsw = (int(c) for c in counts[:5] - before)
         before = counts[:5].copy()
         yield Integration(Y[lo:max(lo, hi)], status, msg, nfev, njev, nlu, nsteps, nsw, scheme)
@@ -451,7 +459,7 @@ def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit, stops):
     lo = done = 0
     nsteps = nlu = nsw = 0
     before = (0, 0, 0, 0, 0)
-    status, message = 0, "reached t_end"
+    status, message = Status.REACHED_T_END, "reached t_end"
     t, y, bound = t_eval[0], y0, t_end
     solver = cls(fun, t, y, bound, **opts)
     landed = False  # as in dopri5: after a located switch the next step is free
@@ -463,13 +471,19 @@ def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit, stops):
                 solver = cls(fun, t, y, bound, **opts)
                 continue
             t_old, y_old = solver.t, solver.y.copy()
-            msg = solver.step()
+            try:
+                msg = solver.step()
+            except (ValueError, np.linalg.LinAlgError) as e:  # an implicit solver's LU on inf
+                status = Status.NON_FINITE
+                message = f"{settings.method} failed at t = {t_old:.6g} s: {e}"
+                break
             if solver.status == "failed":
-                status, message = -1, f"{settings.method} failed at t = {t_old:.6g} s: {msg}"
+                status = Status.STEP_COLLAPSE
+                message = f"{settings.method} failed at t = {t_old:.6g} s: {msg}"
                 break
             y_new = solver.y
             if not np.all(np.isfinite(y_new)):
-                status, message = -1, f"non-finite state at t = {solver.t:.6g} s"
+                status, message = Status.NON_FINITE, f"non-finite state at t = {solver.t:.6g} s"
                 break
             nsteps += 1
             if settings.events and not landed:
@@ -490,11 +504,13 @@ def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit, stops):
                 out.append(sol(t_eval[j]))
                 j += 1
             if gap_limit > 0 and max_gap(P, solver.y) > gap_limit:
-                status, message = -1, (f"loop-closure gap {max_gap(P, solver.y):.3g} m exceeded "
-                                       f"the limit {gap_limit:.3g} m at t = {solver.t:.6g} s")
+                status = Status.GAP_EXCEEDED
+                message = (f"loop-closure gap {max_gap(P, solver.y):.3g} m exceeded the limit "
+                           f"{gap_limit:.3g} m at t = {solver.t:.6g} s")
                 break
             if nsteps >= max_steps:
-                status, message = -1, f"step budget ({max_steps}) exhausted at t = {solver.t:.6g} s"
+                status = Status.BUDGET_EXHAUSTED
+                message = f"step budget ({max_steps}) exhausted at t = {solver.t:.6g} s"
                 break
         done = _leading_finite(out, done, len(out))
         hi = max(lo, min(stop + 1, done) if status == 0 else done)
@@ -534,17 +550,25 @@ def integrate_blocks(P, y0, t_eval, settings, max_steps, gap_limit, scheme="auto
     :class:`Integration` per stop: ``y`` the samples after the previous stop
     up to this one (the first block from sample 0), counters the block's own,
     ``max_steps`` the budget of the whole run. A failure ends it: the failing
-    block holds the samples reached (these may run past its stop) and
-    status -1.
+    block holds the samples reached (these may run past its stop) and its
+    negative :class:`~panel_deploy.dynamics.result.Status`.
 
     ``scheme`` picks the method behind ``settings.method == "compiled"``:
     "dopri5", "ros34pw2" or "auto" (:func:`choose_scheme`); other methods ignore it.
     ``Integration.scheme`` names the compiled scheme used ("" for scipy).
     """
     stops = (len(t_eval) - 1,) if stops is None else stops
+    if not np.all(np.isfinite(kernels.rhs(P, y0))):
+        return _not_started(y0, f"non-finite derivative at t = {t_eval[0]:.6g} s, the start "
+                                "(the hinge or gravity forces overflow); integration not started")
     if settings.method == "compiled":
         return integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit, scheme, stops)
     return integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit, stops)
+
+
+def _not_started(y0, message):
+    """The one block of a run that failed at its first sample."""
+    yield Integration(y0[None, :].copy(), Status.NON_FINITE, message, 1, 0, 0, 0, 0)
 
 
 def integrate(P, y0, t_eval, settings, max_steps, gap_limit, scheme="auto") -> Integration:

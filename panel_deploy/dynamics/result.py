@@ -8,8 +8,26 @@ before the failure (``t`` may then be shorter than requested).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from enum import IntEnum
 
 import numpy as np
+
+
+class Status(IntEnum):
+    """:attr:`SimulationResult.status`: 0 when the run reached t_end, else why it
+    stopped (as :func:`scipy.integrate.solve_ivp`'s status, a code to test; the
+    message says where and what)."""
+
+    REACHED_T_END = 0
+    #: The step size fell below round-off of t (or a scipy solver gave up: its
+    #: failures are step-size failures).
+    STEP_COLLAPSE = -1
+    #: A state or derivative became NaN or infinite.
+    NON_FINITE = -2
+    #: A loop-closure gap exceeded ``simulation.gap_limit`` (the cut hinge came apart).
+    GAP_EXCEEDED = -3
+    #: The step budget ran out before t_end.
+    BUDGET_EXHAUSTED = -4
 
 
 @dataclass
@@ -41,9 +59,10 @@ class SimulationResult:
         The k smallest singular values of the loop-closure Jacobian (empty
         second axis for a tree).
     success : bool
-    status : int
-        0 reached t_end, -1 integration failure (step collapse, non-finite
-        state, constraint blow-up).
+    status : Status
+        0 (``Status.REACHED_T_END``), or the negative code of the failure:
+        -1 step-size collapse, -2 non-finite state, -3 loop-closure gap
+        above its limit, -4 step budget exhausted.
     message : str
     nfev, njev, nlu, nsteps : int
         Right-hand-side and Jacobian evaluations, LU decompositions, steps.
@@ -63,7 +82,7 @@ class SimulationResult:
     constraint_gap: np.ndarray
     closure_sigma_min: np.ndarray
     success: bool
-    status: int
+    status: Status
     message: str
     nfev: int = 0
     njev: int = 0

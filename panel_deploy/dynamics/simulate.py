@@ -59,7 +59,8 @@ def simulate(model: Model, settings, state: State | None = None, *,
     -------
     SimulationResult
         On failure (step collapse, non-finite state, gap blow-up, budget)
-        ``success`` is False, ``status`` -1 and the arrays hold the samples
+        ``success`` is False, ``status`` the cause (a negative
+        :class:`~panel_deploy.dynamics.result.Status`) and the arrays hold the samples
         computed before it (all finite). ``energy`` also has
         "constraint_work", the work done on the system by the exact-closure
         constraint forces (Baumgarte stabilisation makes it non-zero; zero for

@@ -29,22 +29,38 @@ def cell_centre(cell, rows, cols, a, b) -> np.ndarray:
     return np.array([(c - (cols + 1) / 2) * a, ((rows + 1) / 2 - r) * b, 0.0])
 
 
-def design_of(scene: Scene):
-    """The fold design a scene asks for.
+def scene_design(scene: Scene):
+    """The fold design of a scene's array, circuit, ground and merges, as
+    :func:`panel_deploy.fold.design` makes it (it may not pack, and merges may
+    be refused: the design says why).
 
     Raises
     ------
     SceneError
-        If the circuit, ground or merge list is invalid for the array, or the
-        design does not pack into two stacks (the reason is in the message).
+        If the circuit, ground or merge list is invalid for the array.
     """
     arr, f = scene.array, scene.fold
     try:
-        d = fold.design(arr.rows, arr.cols, circuit=f.circuit, ground=f.ground, merge=f.merge)
+        return fold.design(arr.rows, arr.cols, circuit=f.circuit, ground=f.ground, merge=f.merge)
     except DesignError as e:
         raise SceneError("fold", str(e)) from None
+
+
+def design_of(scene: Scene):
+    """The fold design a scene asks for, ready to build a model from.
+
+    Raises
+    ------
+    SceneError
+        As :func:`scene_design`, and if the design does not pack into two
+        stacks or a merge the scene lists is refused (the reason is in the
+        message; ``merge: auto`` keeps the merges that can be made).
+    """
+    d = scene_design(scene)
     if d.stowed is None:
         raise SceneError("fold.circuit", f"the design does not pack into two stacks: {d.reason}")
+    if d.refused and scene.fold.merge not in ("auto", "none"):
+        raise SceneError("fold.merge", "; ".join(m.reason for m in d.refused))
     return d
 
 

@@ -35,16 +35,10 @@ def cmd_fold(args):
         return fold_command(args)
     import json
 
-    from . import fold
-    from .errors import DesignError
+    from .build import scene_design
     from .fold.report import design_dict, design_text
 
-    scene = _load(args)
-    f = scene.fold
-    try:
-        d = fold.design(scene.array.rows, scene.array.cols, f.circuit, f.ground, f.merge)
-    except DesignError as e:
-        raise SceneError("fold", str(e)) from None
+    d = scene_design(_load(args))
     print(json.dumps(design_dict(d), indent=1) if args.json else design_text(d))
     if args.plot:
         from .fold.plot import plot_design

@@ -122,3 +122,13 @@ def test_unpackable_circuit_is_a_scene_error():
             "fold": {"circuit": [[1, 1], [1, 2], [2, 2], [2, 1]]}}
     with pytest.raises(SceneError, match=r"^fold"):
         build_model(scene_from_dict(data))
+
+
+def test_a_listed_merge_that_is_refused_is_a_scene_error(scene):
+    # (1,1)-(1,2) lie on different stowed layers: fold reports it refused,
+    # and a model must not be built without it
+    merge = [[[1, 1], [1, 2]], [[1, 2], [1, 3]]]
+    with pytest.raises(SceneError, match=r"^fold.merge: \(1,1\)-\(1,2\) refused: they lie on layers"):
+        build_model(scene_from_dict(dict(scene.data, fold=dict(scene.data["fold"], merge=merge))))
+    m = build_model(scene_from_dict(dict(scene.data, fold=dict(scene.data["fold"], merge=merge[1:]))))
+    assert len(m.bodies) == 15

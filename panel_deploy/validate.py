@@ -185,6 +185,13 @@ def write_atomic(path, write, flag: str = "output", mode: str = "w") -> Path:
         raise
 
 
+def save_figure(fig, path, flag: str = "--plot", dpi: int = 120) -> Path:
+    """A matplotlib figure written with :func:`write_atomic`, in the format of
+    the file name's suffix (PNG if it has none)."""
+    fmt = Path(path).suffix.lstrip(".").lower() or "png"
+    return write_atomic(path, lambda f: fig.savefig(f, dpi=dpi, format=fmt), flag, mode="wb")
+
+
 def first_non_finite(a) -> tuple | None:
     """Index (tuple) of the first NaN or inf of array ``a``, or None."""
     a = np.asarray(a)

@@ -366,3 +366,12 @@ def test_search_settings_loosen_rtol_atol_and_refinement():
     assert sim.atol / sim.rtol == pytest.approx(loose.simulation.atol / loose.simulation.rtol)
     with pytest.raises(Exception, match=r"optimisation\.rtol"):
         scene(rtol=-1.0)
+
+
+def test_a_non_finite_value_in_the_result_file_makes_it_a_failure():
+    from panel_deploy.optimise import result_to_dict
+    res = optimise(chain_model(), scene(), workers=1, evaluation=bowl_outcome)
+    assert result_to_dict(res)["success"]
+    out = result_to_dict(res, extra={"verification": {"d": math.nan}})
+    assert out["success"] is False
+    assert out["message"].startswith("non-finite result: verification.d = nan")

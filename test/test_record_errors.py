@@ -107,6 +107,18 @@ def test_topic_of_another_type(tmp_path, capsys):
     _one_line_error(capsys, path, "/joint_states is std_msgs/msg/String")
 
 
+@pytest.mark.parametrize("command", [["collide"], ["replay", "--save", "x.rrd"]])
+def test_non_finite_joint_state_names_message_and_joint(tmp_path, capsys, command):
+    path = tmp_path / "nan.mcap"
+    with Recorder(path) as rec:
+        for j in range(3):
+            position = [0.1, float("nan") if j == 2 else 0.2]
+            rec.write("/joint_states", m.JOINT_STATE,
+                      m.joint_state(["a", "b"], j * 0.01, position, [0, 0], [0, 0]), j)
+    assert main([command[0], str(path), *command[1:], "--scene", "paper_4x4"]) == 2
+    _one_line_error(capsys, path, "/joint_states message 2: position of b is nan (not finite)")
+
+
 def test_optimise_record_needs_out(capsys):
     assert main(["optimise", "paper_4x4", "--record", "x.mcap"]) == 2
     assert "--record: needs --out" in capsys.readouterr().err

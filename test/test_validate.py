@@ -8,7 +8,8 @@ import yaml
 
 from panel_deploy.errors import PanelDeployError, SceneError
 from panel_deploy.validate import (MAX_YAML_DEPTH, check_finite, check_output_path,
-                                   first_non_finite_value, load_yaml, read_text, write_atomic)
+                                   first_non_finite_value, load_yaml, read_text, save_figure,
+                                   write_atomic)
 
 
 @pytest.mark.parametrize("text, problem", [
@@ -59,6 +60,29 @@ def test_atomic_write_leaves_no_part_file_and_rescues_the_content(tmp_path, monk
     with pytest.raises(KeyboardInterrupt):
         write_atomic(target, explode, "--out")
     assert os.listdir(target.parent) == ["r.yaml"] and target.read_text() == "k: 1\n"
+
+
+def test_fold_plot_is_written_atomically_and_rescued(tmp_path, monkeypatch):
+    from panel_deploy import fold
+    from panel_deploy.fold.plot import plot_design
+    d = fold.design(4, 4)
+    plot_design(d, tmp_path / "fold.png")
+    assert (tmp_path / "fold.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert os.listdir(tmp_path) == ["fold.png"]
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(PanelDeployError, match=r"^--plot: cannot write .*saved in (\S+)$") as e:
+        plot_design(d, tmp_path / "gone" / "fold.svg")
+    assert open(str(e.value).rsplit("saved in ", 1)[1], "rb").read().lstrip().startswith(b"<?xml")
+
+
+def test_save_figure_takes_the_format_from_the_suffix(tmp_path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig = plt.figure()
+    save_figure(fig, tmp_path / "a.pdf")
+    plt.close(fig)
+    assert (tmp_path / "a.pdf").read_bytes()[:5] == b"%PDF-"
 
 
 def test_read_text_errors_are_one_line(tmp_path):

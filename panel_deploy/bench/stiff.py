@@ -213,15 +213,18 @@ def table(outcomes, fmt: str = "markdown") -> str:
     raise ValueError(f"table: unknown format {fmt!r}")
 
 
-def write_csv(outcomes, path) -> None:
+def write_csv(outcomes, path, flag: str = "--out-dir") -> None:
     import csv
 
+    from ..validate import write_atomic
     names = [f.name for f in dataclasses.fields(Outcome)]
-    with open(path, "w", newline="") as f:
+
+    def write(f):
         w = csv.writer(f)
         w.writerow(names)
         for o in outcomes:
             w.writerow([getattr(o, n) for n in names])
+    write_atomic(path, write, flag)
 
 
 def array_models(scene, sizes) -> tuple[dict, list]:
@@ -285,7 +288,9 @@ def stiff_command(args) -> int:
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     stem = "stiff_cases_quick" if args.quick else "stiff_cases"
-    (out / f"{stem}.md").write_text("\n".join(header) + "\n" + text + "\n")
+    from ..validate import write_atomic
+    write_atomic(out / f"{stem}.md", lambda f: f.write("\n".join(header) + "\n" + text + "\n"),
+                 "--out-dir")
     write_csv(outcomes, out / f"{stem}.csv")
     print("\n".join(header) + "\n" + text)
     return 0

@@ -274,14 +274,17 @@ def work_precision(model: Model, base: SimulationSection, *, window=None, collis
 
 def write_csv(report: WorkPrecision, path) -> None:
     """One row per point, with the window and reference figures repeated on every row."""
+    from ..validate import write_atomic
     names = [f for f in Point.__dataclass_fields__]
-    with open(path, "w", newline="") as f:
+
+    def write(f):
         w = csv.writer(f)
         w.writerow(names + ["window", "reference_spread", "mujoco_reference_spread", "ours_vs_mujoco"])
         for p in report.points:
             w.writerow([getattr(p, n) for n in names]
                        + [report.window, report.reference_spread, report.mujoco_reference_spread,
                           report.ours_vs_mujoco])
+    write_atomic(path, write, "--out")
 
 
 def plot(report: WorkPrecision, path) -> None:
@@ -306,8 +309,11 @@ def plot(report: WorkPrecision, path) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    from ..validate import save_figure
+    try:
+        save_figure(fig, path)
+    finally:
+        plt.close(fig)
 
 
 def summary(report: WorkPrecision) -> str:

@@ -128,5 +128,8 @@ def plot_design(d: FoldDesign, path) -> None:
             f"stacks on ({f0[0]},{f0[1]}) ({f1[0]},{f1[1]}), top first", fontsize=9
         )
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    from ..validate import save_figure
+    try:
+        save_figure(fig, path)
+    finally:
+        plt.close(fig)

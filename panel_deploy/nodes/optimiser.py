@@ -21,7 +21,7 @@ from ..build import build_model
 from ..errors import PanelDeployError
 from ..live import optimisation_scene
 from ..optimise import optimise
-from ..optimise.io import dump_result
+from ..optimise.io import dump_result, result_to_dict
 from ..optimise.parallel import Cancelled
 from . import messages, runtime
 
@@ -97,7 +97,7 @@ class OptimiserNode(runtime.WorkerNode):
         self.result = result
         self.result_pub.publish(messages.string(dump_result(result, scene.name)))
         self.get_logger().info(result.message)
-        if result.success:
+        if result_to_dict(result)["success"]:  # false too if a value came out non-finite
             self._set_target(p["target_node"], result)
 
     def _set_target(self, target, result):

@@ -94,8 +94,9 @@ def optimise_command(args, scene) -> int:
     out = arg("out")
     if out:
         save_result(result, out, scene.name, extra)
+    written = result_to_dict(result, scene.name, extra)
     if arg("json", False):
-        print(json.dumps(result_to_dict(result, scene.name, extra)))
+        print(json.dumps(written))
     elif not out:
         print(dump_result(result, scene.name, extra), end="")
     else:
@@ -110,7 +111,7 @@ def optimise_command(args, scene) -> int:
     if result.status == 2 and not quiet:
         print(next_steps(result, out), file=sys.stderr)
     # A K the search found feasible counts only if the independent re-check agrees.
-    return 0 if result.success and check.outcome.feasible else 1
+    return 0 if written["success"] and check.outcome.feasible else 1
 
 
 def verdict(label, check) -> str:

@@ -57,7 +57,8 @@ class Outcome:
         s, for this run.
     t_stop : float
         Last simulated instant, s: the sample that revealed the first
-        collision, the first flat sample, or the end time.
+        collision, the first flat sample, or the end time (NaN when nothing
+        was simulated; None in :meth:`summary`).
     flat_tolerance : float
         The largest |theta| at which the run counted as flat, rad (the
         scene's ``simulation.flat_tolerance``).
@@ -103,7 +104,7 @@ class Evaluation:
         return {"f": float(self.f), "v": float(o.v), "d": float(o.d),
                 "collision": o.first_collision if o.collided else None,
                 "flat_residual": float(o.flat_residual), "reached_flat": o.reached_flat,
-                "simulated": o.simulated, "message": o.message, "t_stop": float(o.t_stop)}
+                "simulated": o.simulated, "message": o.message, "t_stop": float(o.t_stop) if math.isfinite(o.t_stop) else None}
 
 
 def objective(outcome: Outcome, p: float, q: float, flat_weight: float) -> float:

@@ -50,8 +50,11 @@ def result_to_dict(result, scene_name: str = "", extra: dict | None = None) -> d
     """Plain-Python form of an :class:`~panel_deploy.optimise.search.OptimisationResult`.
 
     ``extra`` (plain values) is appended, e.g. the verification and
-    manufacturing checks of ``panel-deploy optimise``.
+    manufacturing checks of ``panel-deploy optimise``. A NaN or inf anywhere
+    in it makes the result a failure (``success`` false, the message names
+    the first such key): a NaN is never an answer.
     """
+    from ..validate import first_non_finite_value
     names = result.problem.hinge_names
     out = {"format": FORMAT, "scene": scene_name,
            "hinges": {n: {"k": float(k), "c": float(c)}
@@ -72,6 +75,9 @@ def result_to_dict(result, scene_name: str = "", extra: dict | None = None) -> d
                {"nfev": int(result.first_feasible[0]),
                 "wall_time": round(float(result.first_feasible[1]), 3)})
     out.update(extra or {})
+    bad = first_non_finite_value(out)
+    if bad is not None:
+        out.update(success=False, message=f"non-finite result: {bad} ({out['message']})")
     return out
 
 

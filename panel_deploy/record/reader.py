@@ -273,8 +273,9 @@ def joint_states(recording: Recording) -> JointStates:
                                   f"one ({t[j - 1]:.9g} s)")
     for key, out in arrays.items():
         if present[key] and not np.all(np.isfinite(out)):
-            j = int(np.flatnonzero(~np.all(np.isfinite(out), axis=1))[0])
-            raise TrajectoryError(f"{path}: /joint_states message {j}: {key} is not finite")
+            j, i = (int(x) for x in np.argwhere(~np.isfinite(out))[0])
+            raise TrajectoryError(f"{path}: /joint_states message {j}: {key} of {names[i]} is "
+                                  f"{out[j, i]} (not finite)")
     return JointStates(t, names, arrays["position"],
                        arrays["velocity"] if present["velocity"] else None,
                        arrays["effort"] if present["effort"] else None)

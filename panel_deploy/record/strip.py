@@ -70,6 +70,9 @@ def render_strip(d: RecordedDeployment, times, out) -> list:
         ax.set_axis_off()
         ax.set_title(f"t = {t[j]:.3f} s", fontsize=10)
     fig.tight_layout()
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
+    from ..validate import save_figure
+    try:
+        save_figure(fig, out, "--png")
+    finally:
+        plt.close(fig)
     return samples

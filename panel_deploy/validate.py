@@ -149,6 +149,12 @@ def fallback_path(path) -> Path:
     raise OSError("neither the working directory nor the temporary folder is writable")
 
 
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def write_atomic(path, write, flag: str = "output", mode: str = "w") -> Path:
     """Write a file atomically: ``write(f)`` on a temporary file in the target
     folder, renamed over ``path``. No temporary file is left behind.
@@ -162,6 +168,9 @@ def write_atomic(path, write, flag: str = "output", mode: str = "w") -> Path:
     tmp = None
     try:
         fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".part")
+        # mkstemp makes the file private (0600); the result gets the mode
+        # open() would give it
+        os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8"})) as f:
             write(f)
         os.replace(tmp, path)

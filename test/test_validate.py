@@ -45,6 +45,8 @@ def test_atomic_write_leaves_no_part_file_and_rescues_the_content(tmp_path, monk
     target.parent.mkdir()
     write_atomic(target, lambda f: f.write("k: 1\n"), "--out")
     assert target.read_text() == "k: 1\n" and os.listdir(target.parent) == ["r.yaml"]
+    (tmp_path / "plain").write_text("")  # the mode open() gives, not mkstemp's 0600
+    assert target.stat().st_mode == (tmp_path / "plain").stat().st_mode
     # The folder disappears while the work runs: the content goes to a fallback file.
     gone = tmp_path / "gone" / "r.yaml"
     monkeypatch.chdir(tmp_path)

@@ -12,14 +12,17 @@ median time to the first feasible K of those that did: how fast a search is
 can only be told over seeds when, as on the paper scene, the feasible set is
 thin enough that one seed finds it and the next does not.
 
-    python bench/bench_optimise.py [SCENE] [--workers N] [--method local|global]
-                                   [--max-evaluations N] [--seed N | --seeds 0-7]
+    python bench/bench_optimise.py [SCENE] [--seed N | --seeds 0-7]
                                    [--out RESULT.yaml] [--set KEY=VALUE ...]
+
+(method, budget and workers are scene keys: --set optimisation.method=global,
+optimisation.max_evaluations=N, optimisation.workers=N.)
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -87,15 +90,13 @@ def report(model, scene, res, wall, check, sets):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scene", nargs="?", default=str(ROOT / "config" / "scenes" / "paper_4x4.yaml"))
-    p.add_argument("--workers", type=int, default=0)
-    p.add_argument("--method", choices=("local", "global"))
-    p.add_argument("--max-evaluations", type=int)
-    p.add_argument("--seed", type=int)
+    p.add_argument("--seed", type=int, help="optimisation.seed")
     p.add_argument("--seeds", type=seed_list, metavar="0-7",
                    help="one search per seed; prints how many found a confirmed feasible K")
     p.add_argument("--out", help="write the result YAML here")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="scene override, as panel-deploy --set")
+                   help="scene override, as panel-deploy --set (optimisation.method=global, "
+                        "optimisation.max_evaluations=400, optimisation.workers=2, ...)")
     args = p.parse_args(argv)
     if args.seeds and (args.out or args.seed is not None):
         p.error("--seeds runs several searches: give it without --seed and --out")
@@ -106,9 +107,9 @@ def main(argv=None):
     found, walls = [], []
     for seed in seeds:
         start = time.perf_counter()
-        res = optimise(model, scene, workers=args.workers, method=args.method,
-                       max_evaluations=args.max_evaluations, seed=seed,
-                       progress=None if args.seeds else print_progress)
+        run = scene if seed is None else scene.replace(
+            optimisation=dataclasses.replace(scene.optimisation, seed=seed))
+        res = optimise(model, run, progress=None if args.seeds else print_progress)
         wall = time.perf_counter() - start
         walls.append(wall)
         check = verify(model, res.k, scene, tighten=TIGHTEN, refine=REFINE, c=res.c)

@@ -201,13 +201,12 @@ def no_work(monkeypatch):
     """Any simulation, search, export or plot started fails the test."""
     def started(*a, **k):
         raise AssertionError("work started before the arguments were checked")
-    import panel_deploy.dynamics as dynamics
-    import panel_deploy.export.mjcf as mjcf
-    import panel_deploy.fold.plot as plot
-    import panel_deploy.optimise.search as search
+    from panel_deploy import dynamics
+    from panel_deploy.cli import export, optimise
+    from panel_deploy.fold import plot
     monkeypatch.setattr(dynamics, "simulate", started)
-    monkeypatch.setattr(search, "optimise", started)
-    monkeypatch.setattr(mjcf, "export_mjcf", started)
+    monkeypatch.setattr(optimise, "optimise", started)
+    monkeypatch.setattr(export, "export_mjcf", started)
     monkeypatch.setattr(plot, "plot_design", started)
 
 
@@ -228,11 +227,16 @@ def no_work(monkeypatch):
     (["optimise", PAPER, "--perturb-tol", "0.1"], "--perturb-tol: only with --perturb"),
     (["optimise", PAPER, "--springs", "0.1,inf"], "argument --springs: expected finite"),
     (["optimise", PAPER, "--max-evaluations", "0"], "--max-evaluations: expected an integer >= 1"),
-    (["optimise", PAPER, "--method", ""], "argument --method: invalid choice"),
-    (["simulate", PAPER, "--method", ""], "--method: expected one of"),
-    (["simulate", PAPER, "--t-end", "inf"], "--t-end: expected a finite number"),
+    (["optimise", PAPER, "--method", ""], "--method: expected a value for optimisation.method"),
+    (["optimise", PAPER, "--method", "newton"], "--method: expected one of local, global"),
+    (["optimise", PAPER, "--workers", "-1"], "--workers: expected an integer >= 0"),
+    (["simulate", PAPER, "--method", ""], "--method: expected a value for simulation.method"),
+    (["simulate", PAPER, "--method", "euler"], "--method: expected one of"),
+    (["simulate", PAPER, "--closure", "tight"], "--closure: expected one of penalty, exact"),
+    (["simulate", PAPER, "--t-end", "inf"], "--t-end: expected a number, got str 'inf'"),
+    (["simulate", PAPER, "--t-end", ".inf"], "--t-end: expected a finite number"),
     (["simulate", PAPER, "--t-end", "1e6"], "--t-end: expected a number <= 600"),
-    (["simulate", PAPER, "--t-end", "abc"], "argument --t-end: invalid float value"),
+    (["simulate", PAPER, "--t-end", "abc"], "--t-end: expected a number, got str 'abc'"),
     (["fold", "--scene", PAPER, "--rows", "3"], "--rows: not with --scene"),
     (["fold", "--scene", PAPER, "--circuit", "1"], "--circuit: not with --scene"),
     (["fold", "--rows", "4", "--cols", "4", "--set", "array.rows=x"], "--set: only with --scene"),
@@ -377,8 +381,8 @@ def test_bad_result_files_are_one_line(capsys, tmp_path, no_work, flag, text, ex
 
 def test_export_refuses_degenerate_models(capsys, tmp_path, monkeypatch):
     from panel_deploy.export import mjcf
-    real = mjcf.export_mjcf
-    monkeypatch.setattr(mjcf, "export_mjcf", lambda m: real(m).replace('pos="0.0', 'pos="nan', 1))
+    real = mjcf._document
+    monkeypatch.setattr(mjcf, "_document", lambda *a: real(*a).replace('pos="0.0', 'pos="nan', 1))
     out = tmp_path / "m.xml"
     line = one_line_error(capsys, ["export", PAPER, "--mjcf", str(out)])
     assert "export: the model has a non-finite value (nan on line" in line
@@ -388,7 +392,7 @@ def test_export_refuses_degenerate_models(capsys, tmp_path, monkeypatch):
 def test_optimise_result_is_rescued_when_the_folder_vanishes(capsys, tmp_path, monkeypatch):
     folder = tmp_path / "out"
     folder.mkdir()
-    import panel_deploy.optimise.command as command
+    from panel_deploy.cli import optimise as command
     real = command.verify
 
     def verify_then_remove(*a, **k):  # the folder goes away while the work runs

@@ -1,13 +1,13 @@
 """Merging, Kutzbach DoF, design(), reports, CLI command and plot."""
 
-import argparse
 import json
 
 import pytest
 
+from panel_deploy.cli import main
 from panel_deploy.errors import DesignError
 from panel_deploy.fold import assembly_dof, design, designs, kutzbach_dof
-from panel_deploy.fold.report import design_dict, design_text, fold_command
+from panel_deploy.fold.report import design_dict, design_text
 
 PAPER = [(1, 2), (1, 1), (2, 1), (3, 1), (4, 1), (4, 2), (3, 2), (2, 2),
          (2, 3), (3, 3), (4, 3), (4, 4), (3, 4), (2, 4), (1, 4), (1, 3)]
@@ -82,7 +82,7 @@ def test_design_errors():
 def test_reports():
     d = design(4, 4, PAPER)
     js = design_dict(d, 2)
-    json.dumps(js)
+    assert json.loads(json.dumps(js)) == js  # plain JSON types only
     assert js["stacks"][0][0] == [1, 2] and js["stacks"][0][-1] == [2, 2]
     assert js["dof_cells"] == 10 and js["dof_bodies"] == 6 and js["packs"]
     folded = [h for h in js["hinges"] if h["folded"]]
@@ -91,27 +91,22 @@ def test_reports():
     assert "stack 0: (1,2) (1,1)" in text and "DoF 10 (cells) -> 6 (bodies)" in text
 
 
-def _args(**kw):
-    base = dict(rows=4, cols=4, scene=None, json=False, plot=None, circuit=None, limit=50)
-    base.update(kw)
-    return argparse.Namespace(**base)
-
-
 def test_fold_command(capsys, tmp_path):
-    assert fold_command(_args()) == 0
+    assert main(["fold", "--rows", "4", "--cols", "4"]) == 0
     out = capsys.readouterr().out
     assert "6 Hamiltonian circuits" in out and "6 pack" in out
-    assert fold_command(_args(cols=6, json=True, limit=3)) == 0
+    assert main(["fold", "--rows", "4", "--cols", "6", "--json", "--limit", "3"]) == 0
     js = json.loads(capsys.readouterr().out)
     assert js["circuits"] == 37 and js["packable"] == 29 and len(js["listed"]) == 3
     png = tmp_path / "d.png"
-    assert fold_command(_args(circuit=2, plot=str(png))) == 0
+    assert main(["fold", "--rows", "4", "--cols", "4", "--circuit", "2", "--plot", str(png)]) == 0
     assert png.stat().st_size > 10000
     assert "verdict: packs into two stacks" in capsys.readouterr().out
-    assert fold_command(_args(circuit=99)) == 2
-    assert "out of range" in capsys.readouterr().err
-    assert fold_command(_args(cols=6, circuit=5)) == 1
+    assert main(["fold", "--rows", "4", "--cols", "4", "--circuit", "99"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("panel-deploy: error: --circuit: ") and "out of range" in err
+    assert main(["fold", "--rows", "4", "--cols", "6", "--circuit", "5"]) == 1
     capsys.readouterr()
-    assert fold_command(_args(rows=8, cols=8, limit=2, json=True)) == 0
+    assert main(["fold", "--rows", "8", "--cols", "8", "--limit", "2", "--json"]) == 0
     js = json.loads(capsys.readouterr().out)
     assert js["circuits"] == 4638576 and js["packable"] is None and len(js["listed"]) == 2

@@ -279,13 +279,13 @@ def test_fuzz_trajectory_arrays(trajectory, name, value):
 def test_the_contract_check_can_fail(monkeypatch):
     """run_cli catches what it is there for: a traceback, and an exit 2 of several lines."""
     import panel_deploy.cli as cli
-    monkeypatch.setattr(cli, "cmd_schema", lambda args: 1 / 0)
+    monkeypatch.setattr(cli, "_schema", lambda args: 1 / 0)
     with pytest.raises(Broken, match="traceback ZeroDivisionError"):
         run_cli("self", ["schema"])
 
     def two_lines(args):
         print("panel-deploy: error: a\nb", file=__import__("sys").stderr)
         return 2
-    monkeypatch.setattr(cli, "cmd_schema", two_lines)
+    monkeypatch.setattr(cli, "_schema", two_lines)
     with pytest.raises(Broken, match="one line"):
         run_cli("self", ["schema"])

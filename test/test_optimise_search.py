@@ -8,6 +8,7 @@ exercised in test_optimise_pipeline.py.
 
 import math
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -39,7 +40,7 @@ def chain_model(n_bodies=4, k=0.1, beta=0.043, gravity=(0.0, 0.0, 0.0)):
 
 def scene(**optimisation):
     data = {"array": {"rows": 1, "cols": 4, "length": A, "width": A, "thickness": T, "mass": MASS},
-            "optimisation": {"bounds": [0.001, 0.2], "k0": 0.1, **optimisation}}
+            "optimisation": {"bounds": [0.001, 0.2], "k0": 0.1, "workers": 1, **optimisation}}
     return scene_from_dict(data)
 
 
@@ -221,7 +222,7 @@ def test_centring_prefers_a_k_with_margin_in_damping_to_a_knife_edge():
 
     model = chain_model(beta=0.043)
     problem = StiffnessProblem.from_model(model, (0.001, 0.2), 0.1, damping_bounds=(0.01, 0.5))
-    search = _Search(problem, SerialBackend(Job(model, scene(), two_basins)), 200, None, 0.05, 3)
+    search = _Search(problem, SerialBackend(Job(model, scene(), two_basins)), 200, None)
     knife, wide = search._batch([np.log10([0.1, 0.1, 0.1, 0.2]), np.log10([0.01, 0.1, 0.1, 0.2])])
     assert knife.f < wide.f < 0
     search.centre_damping()
@@ -322,10 +323,12 @@ def test_bad_options_raise_before_any_evaluation():
     bad = s.replace(optimisation=type(s.optimisation)(bounds=(0.2, 0.001), k0=0.1))
     with pytest.raises(OptimisationError, match="^bounds: "):
         optimise(chain_model(), bad, workers=1, evaluation=bowl_outcome)
-    for kwargs, field in (({"workers": -1}, "workers"), ({"method": "newton"}, "method"),
-                          ({"max_evaluations": 0}, "max_evaluations"), ({"fd_step": 0}, "fd_step")):
+    with pytest.raises(OptimisationError, match="^workers: "):
+        optimise(chain_model(), s, workers=-1, evaluation=bowl_outcome)
+    for field, value in (("method", "newton"), ("max_evaluations", 0), ("restarts", -1)):
+        bad = s.replace(optimisation=replace(s.optimisation, **{field: value}))
         with pytest.raises(OptimisationError, match=f"^{field}: "):
-            optimise(chain_model(), s, evaluation=bowl_outcome, **kwargs)
+            optimise(chain_model(), bad, evaluation=bowl_outcome)
 
 
 def test_unreachable_scheduler_is_a_clear_error():

@@ -170,13 +170,13 @@ def test_a_wrong_command_is_caught():
             "panel-deploy simulate paper_4x4 --no-such-flag\n"
             "panel-deploy deploy paper_4x4\n"
             "panel-deploy optimise\n"
-            "panel-deploy optimise paper_4x4 \\\n  --method sideways\n```\n")
+            "panel-deploy optimise paper_4x4 \\\n  --perturb many\n```\n")
     commands = block_commands(text)
     assert [c[1] for c in commands] == ["simulate", "simulate", "deploy", "optimise", "optimise"]
     assert parse_error(commands[0]) is None
     errors = [parse_error(c) for c in commands[1:]]
     assert all(errors), errors
-    assert "--no-such-flag" in errors[0] and "deploy" in errors[1] and "sideways" in errors[3]
+    assert "--no-such-flag" in errors[0] and "deploy" in errors[1] and "many" in errors[3]
 
 
 def test_a_wrong_inline_command_is_caught():

@@ -8,7 +8,7 @@ import pytest
 from panel_deploy.record import messages as m
 from panel_deploy.record import open_recording
 from panel_deploy.record.analysis import read_deployment
-from panel_deploy.run import simulate_scene
+from panel_deploy.pipeline import simulate_scene
 from panel_deploy.scene import load_scene, resolve_scene
 
 BAGS = Path(__file__).resolve().parent.parent / "bags"

@@ -13,7 +13,7 @@ import pytest
 from panel_deploy.cli import main
 from panel_deploy.record import messages as m
 from panel_deploy.record.writer import Recorder
-from panel_deploy.run import simulate_scene
+from panel_deploy.pipeline import simulate_scene
 from panel_deploy.scene import load_scene, resolve_scene
 
 

@@ -29,7 +29,7 @@ from panel_deploy.dynamics.report import hinge_states
 from panel_deploy.export.urdf import link_poses, model_urdf
 from panel_deploy.live import scene_from_yaml
 from panel_deploy.record import messages as m
-from panel_deploy.run import simulate_scene
+from panel_deploy.pipeline import simulate_scene
 from panel_deploy.scene import load_scene, resolve_scene
 
 PER_SAMPLE = ("/clock", "/joint_states", "/panel_deploy/panels", "/tf")

@@ -4,6 +4,6 @@ Library code for ``panel-deploy bench ...`` and the scripts in ``bench/``;
 timings are printed and written, never asserted.
 """
 
-from .work_precision import work_precision, work_precision_command
+from .work_precision import work_precision
 
-__all__ = ["work_precision", "work_precision_command"]
+__all__ = ["work_precision"]

@@ -340,21 +340,3 @@ def summary(report: WorkPrecision) -> str:
     lines.append(f"ours at 1e-6 rad / MuJoCo at 1e-3 rad: {t_ours6:.4g} / {t_mj3:.4g} s = "
                  f"{t_ours6 / t_mj3:.3g}")
     return "\n".join(lines)
-
-
-def work_precision_command(args, scene=None) -> int:
-    """CLI ``panel-deploy bench work-precision SCENE``.
-
-    ``args``: scene, out (CSV path), plot (PNG path), repeats, quick.
-    """
-    from ..build import build_model
-    from ..scene import load_scene
-
-    scene = scene if scene is not None else load_scene(args.scene)
-    report = work_precision(build_model(scene), scene.simulation, collision=scene.collision,
-                            quick=args.quick, repeats=args.repeats, verbose=True)
-    write_csv(report, args.out)
-    plot(report, args.plot)
-    print(summary(report))
-    print(f"wrote {args.out} and {args.plot}")
-    return 0

@@ -9,9 +9,9 @@ collision, and what is guaranteed between samples, is stated in
 :mod:`panel_deploy.collision.geometry`.
 """
 
-from .check import CollisionReport, TrajectoryCheck, check_trajectory, collide_command
+from .check import CollisionReport, TrajectoryCheck, check_trajectory
 from .geometry import BoxSet, PairGeometry
 from .monitor import CollisionEvent, CollisionMonitor, CollisionSettings
 
 __all__ = ["BoxSet", "CollisionEvent", "CollisionMonitor", "CollisionReport", "CollisionSettings",
-           "PairGeometry", "TrajectoryCheck", "check_trajectory", "collide_command"]
+           "PairGeometry", "TrajectoryCheck", "check_trajectory"]

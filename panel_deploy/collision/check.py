@@ -8,7 +8,6 @@ is invalid.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -265,43 +264,3 @@ class TrajectoryCheck:
             counters=dict(m.counters, exact_fallbacks=m.exact_fallbacks),
             settings=self.settings, wall_time=time.perf_counter() - self._start,
             flat_contact=m.flat_contact)
-
-
-def collide_command(args) -> int:
-    """``panel-deploy collide TRAJECTORY [--scene SCENE] [--json]``: check a
-    saved trajectory (``.npz``) or the ``/joint_states`` of an MCAP recording.
-
-    The model is rebuilt from the scene stored in the file (for a recording,
-    ``--scene`` when given); only its geometry and tree matter here, not the
-    stored stiffnesses.
-    """
-    from ..build import build_model
-    from ..errors import SceneError
-    from ..record.reader import is_mcap
-    from ..trajectory_io import load_trajectory
-
-    if is_mcap(args.trajectory):
-        from ..record.analysis import recording_trajectory
-        result, scene = recording_trajectory(args.trajectory, getattr(args, "scene", None))
-    elif getattr(args, "scene", None):
-        raise SceneError("--scene", "only for an MCAP recording; a .npz trajectory carries its scene")
-    else:
-        result, scene, stiffness = load_trajectory(args.trajectory)
-    model = build_model(scene)
-    from ..validate import check_stored_trajectory
-    check_stored_trajectory(args.trajectory, result, model,
-                            None if is_mcap(args.trajectory) else stiffness)
-    report = check_trajectory(model, result, CollisionSettings.from_scene(scene))
-    failed = getattr(result, "success", True) is False
-    if getattr(args, "json", False):
-        out = report.to_dict()
-        if failed:  # the run stopped early: the check covers only what it computed
-            out["run"] = {"success": False, "status": int(result.status), "message": result.message,
-                          "t_end": float(result.t[-1])}
-        print(json.dumps(out))
-    else:
-        if failed:
-            print(f"the stored run FAILED at t = {result.t[-1]:.4g} s ({result.message}): "
-                  "checked up to there")
-        print(report.summary())
-    return 0

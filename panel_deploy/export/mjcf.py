@@ -52,6 +52,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from ..errors import ModelError
 from ..kinematics import forward_kinematics
 from ..model import Model
 
@@ -182,6 +183,10 @@ def _axis_quat(axis, angle):
 def export_mjcf(model: Model, *, timestep: float = 1e-5, integrator: str = "RK4") -> str:
     """The model as an MJCF document (a string), see the module doc.
 
+    Raises :class:`~panel_deploy.errors.ModelError` if the model's numbers
+    cannot make a valid document (a singular mass matrix, a NaN or inf from
+    degenerate panels): an MJCF with ``nan`` in it is never returned.
+
     Parameters
     ----------
     model : Model
@@ -196,6 +201,21 @@ def export_mjcf(model: Model, *, timestep: float = 1e-5, integrator: str = "RK4"
         MJCF XML. Joint names are the hinge names, body names the body names;
         :func:`qpos_index` maps coordinates to ``qpos``.
     """
+    try:
+        with np.errstate(all="ignore"):
+            text = _document(model, timestep, integrator)
+    except (np.linalg.LinAlgError, ZeroDivisionError, FloatingPointError) as e:
+        raise ModelError(f"export: the model's mass matrix cannot be used ({e}): check the "
+                         "array sizes and masses") from None
+    bad = _NON_FINITE.search(text)
+    if bad:
+        line = text.count("\n", 0, bad.start()) + 1
+        raise ModelError(f"export: the model has a non-finite value ({bad.group(0)} on line {line} "
+                         "of the MJCF): check the array sizes and masses (degenerate panels?)")
+    return text
+
+
+def _document(model: Model, timestep: float, integrator: str) -> str:
     children = _children(model)
     solref = solref_parameters(model)
     imp = f'"{IMPEDANCE} {IMPEDANCE} 0.001 0.5 2"'
@@ -271,35 +291,3 @@ def export_mjcf(model: Model, *, timestep: float = 1e-5, integrator: str = "RK4"
     lines.append("  </keyframe>")
     lines.append("</mujoco>")
     return "\n".join(lines) + "\n"
-
-
-def export_command(args, scene=None) -> int:
-    """CLI ``panel-deploy export SCENE --mjcf FILE.xml``: write the scene's model as MJCF.
-
-    ``scene`` is the loaded :class:`~panel_deploy.scene.Scene` (else
-    ``args.scene`` is loaded); ``args.mjcf`` is the output path. Returns the
-    exit status.
-    """
-    from ..build import build_model
-    from ..scene import load_scene
-
-    from ..errors import ModelError
-    from ..validate import check_output_path, write_atomic
-
-    check_output_path(args.mjcf, "--mjcf")
-    model = build_model(scene if scene is not None else load_scene(args.scene))
-    try:
-        with np.errstate(all="ignore"):
-            text = export_mjcf(model)
-    except (np.linalg.LinAlgError, ZeroDivisionError, FloatingPointError) as e:
-        raise ModelError(f"export: the model's mass matrix cannot be used ({e}): check the "
-                         "array sizes and masses") from None
-    bad = _NON_FINITE.search(text)
-    if bad:
-        line = text.count("\n", 0, bad.start()) + 1
-        raise ModelError(f"export: the model has a non-finite value ({bad.group(0)} on line {line} "
-                         "of the MJCF): check the array sizes and masses (degenerate panels?)")
-    write_atomic(args.mjcf, lambda f: f.write(text), "--mjcf")
-    print(f"wrote {args.mjcf}: {model.n_bodies} bodies, {model.n_coords} joints, "
-          f"{len(model.cut_hinges)} cut hinge(s)")
-    return 0

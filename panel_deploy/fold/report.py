@@ -1,13 +1,10 @@
-"""Text and JSON-able reports of fold designs, and the ``panel-deploy fold`` command."""
+"""Text and JSON-able reports of fold designs."""
 
 from __future__ import annotations
 
 import itertools
-import json
-import sys
 
 from ..errors import DesignError
-from ..progress import Progress
 from .circuits import ENUMERATION_LIMIT, count_circuits, count_circuits_up_to_symmetry
 from .design import FoldDesign
 
@@ -193,57 +190,3 @@ def summary_text(s: dict) -> str:
         )
         lines.append(f"  {e['index']:5d}  {verdict}")
     return "\n".join(lines)
-
-
-def fold_command(args) -> int:
-    """Run ``panel-deploy fold``: report one design or list an array's designs.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        ``rows, cols`` (int), ``circuit`` (index or None: list the designs),
-        ``json`` (bool: print JSON instead of text), ``plot`` (PNG path or
-        None: draw the design, or the first packable listed one), ``limit``
-        (most circuits listed, default 50). ``scene`` is ignored.
-
-    Returns
-    -------
-    int
-        0 on success, 1 if the requested circuit does not pack, 2 for an
-        invalid request (message on stderr).
-    """
-    from . import design, designs
-
-    try:
-        rows, cols = args.rows, args.cols
-        limit = getattr(args, "limit", 50)
-        limit = 50 if limit is None else limit
-        circuit = getattr(args, "circuit", None)
-        if circuit is not None:
-            d = design(rows, cols, circuit)
-            out = design_dict(d, circuit) if args.json else design_text(d, circuit)
-            code = 0 if d.stowed is not None else 1
-            plotted = d
-        else:
-            count = count_circuits(rows, cols)
-            examined = count if rows * cols <= ENUMERATION_LIMIT else min(limit, count)
-            with Progress(examined, f"fold {rows} x {cols}", "circuits") as bar:
-                out = designs_summary(rows, cols, limit, progress=bar.update)
-            code = 0
-            plotted = None
-            if getattr(args, "plot", None):
-                found = [(i, x) for i, x in itertools.islice(designs(rows, cols), max(limit, 1))]
-                plotted = next((x for _, x in found if x.stowed is not None), found[0][1] if found else None)
-            if not args.json:
-                out = summary_text(out)
-        if getattr(args, "plot", None):
-            if plotted is None:
-                raise DesignError(f"nothing to plot: the {rows} x {cols} array has no circuit")
-            from .plot import plot_design
-
-            plot_design(plotted, args.plot)
-    except DesignError as exc:
-        print(f"panel-deploy fold: {exc}", file=sys.stderr)
-        return 2
-    print(json.dumps(out, indent=1) if args.json else out)
-    return code

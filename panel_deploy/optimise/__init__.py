@@ -3,7 +3,7 @@ the array deploys without collision and reaches flat.
 
 Public API::
 
-    optimise(model, settings, *, workers=None, dask_address=None, progress=None, ...)
+    optimise(model, scene, *, k0=None, groups=None, workers=None, dask_address=None, progress=None, ...)
         -> OptimisationResult
     evaluate(model, k, settings, *, c=None) -> Evaluation
     objective(outcome, p, q, flat_weight) -> float
@@ -11,10 +11,8 @@ Public API::
     snap_to_springs(k, springs, *, max_parallel=2, zero_ratio=10.0, mode="up")
     verify(model, k, settings, *, tighten=10.0, refine=2) -> Evaluation
     tolerance_check(model, k, settings, *, n=20, stiffness_tol=0.05, damping_tol=0.05)
-    optimise_command(args, scene)  # panel-deploy optimise
 """
 
-from .command import optimise_command
 from .evaluate import FLAT_TOLERANCE, Evaluation, Outcome, damping_ratio, evaluate, objective, run_deployment
 from .io import load_damping, load_hinges, load_stiffness, result_to_dict, save_result
 from .manufacture import SpringAssignment, ToleranceReport, snap_to_springs, soft_hinges, tolerance_check, verify
@@ -23,7 +21,7 @@ from .search import OptimisationResult, Progress, optimise, print_progress
 
 __all__ = [
     "FLAT_TOLERANCE", "Evaluation", "OptimisationResult", "Outcome", "Progress", "SpringAssignment",
-    "StiffnessProblem", "ToleranceReport", "damping_ratio", "evaluate", "load_damping", "load_hinges", "load_stiffness", "objective",
-    "optimise", "optimise_command", "print_progress", "result_to_dict", "run_deployment",
-    "save_result", "snap_to_springs", "soft_hinges", "tolerance_check", "verify",
+    "StiffnessProblem", "ToleranceReport", "damping_ratio", "evaluate", "load_damping",
+    "load_hinges", "load_stiffness", "objective", "optimise", "print_progress", "result_to_dict",
+    "run_deployment", "save_result", "snap_to_springs", "soft_hinges", "tolerance_check", "verify",
 ]

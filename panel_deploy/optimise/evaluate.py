@@ -104,7 +104,8 @@ class Evaluation:
         return {"f": float(self.f), "v": float(o.v), "d": float(o.d),
                 "collision": o.first_collision if o.collided else None,
                 "flat_residual": float(o.flat_residual), "reached_flat": o.reached_flat,
-                "simulated": o.simulated, "message": o.message, "t_stop": float(o.t_stop) if math.isfinite(o.t_stop) else None}
+                "simulated": o.simulated, "message": o.message,
+                "t_stop": float(o.t_stop) if math.isfinite(o.t_stop) else None}
 
 
 def objective(outcome: Outcome, p: float, q: float, flat_weight: float) -> float:

@@ -15,7 +15,7 @@ closest pair or instant switches; a collision appearing or vanishing jumps f
 from -q d to p v. Finite differences at scipy's default step (~1e-8) would
 measure those jumps and the integrator's error, not the trend. So the
 gradient is a forward difference with a deliberately large step
-``fd_step`` in log10 k (default 0.05, a 12 % change of the spring): that
+:data:`FD_STEP` in log10 k (0.05, a 12 % change of the spring): that
 moves the deployment's events by several sample intervals, so the difference
 averages over the sampling noise, and the n + 1 evaluations of a gradient
 run as one parallel batch.
@@ -35,7 +35,6 @@ from ..errors import OptimisationError
 from .evaluate import Evaluation, run_deployment
 from .parallel import BudgetExhausted, Cancelled, Evaluator, Job, make_backend
 from .problem import StiffnessProblem
-
 
 #: How far (decades of c/k, a factor 2) and how finely (1.2 %) the ends of
 #: the result's feasible c/k range are looked for (:meth:`_Search.centre_damping`):
@@ -141,10 +140,19 @@ class OptimisationResult:
         return self.best.outcome
 
 
-def optimise(model, settings, *, workers=None, dask_address=None, progress: Callable | None = None,
-             groups=None, k0=None, method=None, max_evaluations=None, restarts=None, seed=None,
-             fd_step=0.05, patience=3, popsize=2, evaluation=run_deployment,
-             stop: Callable | None = None) -> OptimisationResult:
+#: Forward-difference step of the gradient, in log10 k (a 12 % change of the
+#: spring; see the module docstring).
+FD_STEP = 0.05
+#: Iterations a local search may spend while every K seen so far collides
+#: before it restarts from a new K_0.
+PATIENCE = 3
+#: Differential evolution population per variable (global method).
+POPSIZE = 2
+
+
+def optimise(model, scene, *, k0=None, groups=None, workers=None, dask_address=None,
+             progress: Callable | None = None, stop: Callable | None = None,
+             evaluation=run_deployment) -> OptimisationResult:
     """Choose hinge stiffnesses K so that the array deploys without collision.
 
     Minimises f(K) of :func:`~panel_deploy.optimise.evaluate.objective`
@@ -158,40 +166,32 @@ def optimise(model, settings, *, workers=None, dask_address=None, progress: Call
     model : Model
         Base model; its c/k ratios set the damping (or the start c/k, when
         the damping ratio is a variable).
-    settings : Scene
+    scene : Scene
         ``optimisation`` gives p, q, flat_weight, bounds, k0,
         damping_ratio_bounds, method, restarts, max_evaluations, workers,
         seed, rtol, refine;
         ``simulation`` and ``collision``, as :func:`search_settings`
         adjusts them, are used for every evaluation.
-    workers : int, optional
-        Local processes; 0 all cores, 1 in this process. Default
-        ``settings.optimisation.workers``.
-    dask_address : str, optional
-        Run the evaluations on this Dask scheduler instead of locally.
-    progress : callable, optional
-        Called with a :class:`Progress` after every batch of evaluations.
-    groups : sequence of sequence of (int or str), optional
-        Override ``model.metadata["hinge_groups"]``.
     k0 : float, (n_groups,) or (n_hinges,) array_like, optional
         Starting stiffness (N m/rad): one value, one per group, or one per
         hinge (a previous result's K, to go on from it); default the
         scene's ``optimisation.k0``.
-    method, max_evaluations, restarts, seed : optional
-        Override the scene's values.
-    fd_step : float
-        Forward-difference step in log10 k (see the module docstring).
-    patience : int
-        Iterations a local search may spend while every K seen so far
-        collides before it restarts from a new K_0.
-    popsize : int
-        Differential evolution population per variable (global method).
-    evaluation : callable
-        ``evaluation(model, settings) -> Outcome``, picklable, top-level;
-        default simulate + collision check.
+    groups : sequence of sequence of (int or str), optional
+        Hinges sharing one stiffness; default ``model.metadata["hinge_groups"]``
+        (the scene's ``hinges.groups``).
+    workers : int, optional
+        Local processes; 0 all cores, 1 in this process. Default
+        ``scene.optimisation.workers``.
+    dask_address : str, optional
+        Run the evaluations on this Dask scheduler instead of locally.
+    progress : callable, optional
+        Called with a :class:`Progress` after every batch of evaluations.
     stop : callable, optional
         Asked before every batch of evaluations (from the search's thread);
         True ends the search as Ctrl-C does: status 3, the best K so far.
+    evaluation : callable
+        ``evaluation(model, scene) -> Outcome``, picklable, top-level;
+        default simulate + collision check.
 
     Returns
     -------
@@ -200,33 +200,28 @@ def optimise(model, settings, *, workers=None, dask_address=None, progress: Call
     Raises
     ------
     OptimisationError
-        Bad bounds, K_0, groups, workers, method, or an unreachable scheduler.
+        Bad bounds, K_0, groups, workers, method, budget, or an unreachable
+        scheduler.
     """
-    opt = settings.optimisation
-    method = opt.method if method is None else method
-    if method not in ("local", "global"):
-        raise OptimisationError(f"method: expected local or global, got {method!r}")
-    max_evaluations = opt.max_evaluations if max_evaluations is None else max_evaluations
-    restarts = opt.restarts if restarts is None else restarts
-    for name, value, low in (("max_evaluations", max_evaluations, 1), ("restarts", restarts, 0)):
+    opt = scene.optimisation
+    if opt.method not in ("local", "global"):
+        raise OptimisationError(f"method: expected local or global, got {opt.method!r}")
+    for name, value, low in (("max_evaluations", opt.max_evaluations, 1),
+                             ("restarts", opt.restarts, 0)):
         if not isinstance(value, int) or isinstance(value, bool) or value < low:
             raise OptimisationError(f"{name}: expected an integer >= {low}, got {value!r}")
-    if not isinstance(patience, int) or patience < 1:
-        raise OptimisationError(f"patience: expected an integer >= 1, got {patience!r}")
-    if not fd_step > 0:
-        raise OptimisationError(f"fd_step: expected a step > 0 in log10 k, got {fd_step!r}")
     problem = StiffnessProblem.from_model(model, opt.bounds, opt.k0 if k0 is None else k0,
                                           groups, opt.damping_ratio_bounds)
-    rng = np.random.default_rng(opt.seed if seed is None else seed)
-    backend = make_backend(Job(model, search_settings(settings), evaluation),
+    rng = np.random.default_rng(opt.seed)
+    backend = make_backend(Job(model, search_settings(scene), evaluation),
                            opt.workers if workers is None else workers, dask_address)
-    search = _Search(problem, backend, max_evaluations, progress, fd_step, patience, stop)
+    search = _Search(problem, backend, opt.max_evaluations, progress, stop)
     start = time.perf_counter()
     try:
-        converged = search.run(method, restarts, rng, popsize)
+        converged = search.run(opt.method, opt.restarts, rng)
     finally:
         backend.close()
-    return search.result(method, converged, time.perf_counter() - start)
+    return search.result(opt.method, converged, time.perf_counter() - start)
 
 
 def search_settings(settings):
@@ -256,11 +251,9 @@ def search_settings(settings):
 class _Search:
     """State of one optimisation run: evaluator, phase, iteration counts."""
 
-    def __init__(self, problem, backend, max_evaluations, progress, fd_step, patience, stop=None):
+    def __init__(self, problem, backend, max_evaluations, progress, stop=None):
         self.problem = problem
-        self.patience = patience
         self.progress = progress
-        self.fd_step = fd_step
         self.evaluator = Evaluator(backend, max_evaluations, on_batch=self._report, stop=stop)
         self.phase = ""
         self.iteration = 0
@@ -290,7 +283,7 @@ class _Search:
         """f(x) and its forward-difference gradient, as one parallel batch."""
         lo, hi = np.array(self.problem.x_bounds).T
         # Step backwards where a forward step would leave the bounds.
-        h = np.where(x + self.fd_step <= hi, self.fd_step, -self.fd_step)
+        h = np.where(x + FD_STEP <= hi, FD_STEP, -FD_STEP)
         h = np.where(x + h >= lo, h, hi - x)
         points = [x] + [x + h[i] * np.eye(len(x))[i] for i in range(len(x))]
         f = np.array([e.f for e in self._batch(points)])
@@ -301,8 +294,8 @@ class _Search:
         # Eq. (8) inside the colliding region only asks for a slower impact,
         # which softer springs always give: the search then slides towards the
         # lower bound and never leaves the region. Fig. 4's answer is a new
-        # K_0, so a start still colliding after `patience` iterations ends.
-        if self.iteration >= self.patience and self.evaluator.best.outcome.collided:
+        # K_0, so a start still colliding after PATIENCE iterations ends.
+        if self.iteration >= PATIENCE and self.evaluator.best.outcome.collided:
             raise StopIteration
 
     def local(self, x0) -> bool:
@@ -316,18 +309,18 @@ class _Search:
                        options={"ftol": 1e-4, "gtol": 1e-4, "maxiter": 50})
         return bool(res.success)
 
-    def global_(self, rng, popsize, x0) -> None:
+    def global_(self, rng, x0) -> None:
         """Differential evolution over the whole box, seeded with x0."""
         self.phase, self.iteration = "global", 0
         n = self.problem.n
         generations = max(1, (self.evaluator.max_evaluations - self.evaluator.nfev)
-                          // (popsize * n) - 1)
+                          // (POPSIZE * n) - 1)
 
         def batch(xs):
             return np.array([e.f for e in self._batch(np.atleast_2d(xs.T))])
 
         differential_evolution(batch, self.problem.x_bounds, x0=x0,
-                               popsize=popsize, maxiter=generations, vectorized=True,
+                               popsize=POPSIZE, maxiter=generations, vectorized=True,
                                updating="deferred", polish=False, tol=1e-3,
                                rng=rng, callback=self._iterated)
 
@@ -417,7 +410,7 @@ class _Search:
                 side[0 if e.outcome.feasible else 1] = mid
         return sides[0][0], sides[1][0]
 
-    def run(self, method, restarts, rng, popsize) -> bool:
+    def run(self, method, restarts, rng) -> bool:
         """Fig. 4: search, restart while no feasible K; True if the last local search converged.
 
         When c/k is a variable, :data:`CENTRE_EVALUATIONS` evaluations are
@@ -436,7 +429,7 @@ class _Search:
             if self.problem.damping_variable:
                 x0 = self.damping_line(x0)
             if method == "global":
-                self.global_(rng, popsize, x0)
+                self.global_(rng, x0)
                 x0 = self.problem.x_of(self.evaluator.best.k, self.evaluator.best.c)
             for attempt in range(restarts + 1):
                 if attempt:

@@ -88,7 +88,7 @@ def record_deployment(path, scene, model):
     and record it all to ``path`` while it is computed.
 
     Returns ``(result, report)`` equal to what
-    :func:`panel_deploy.run.simulate_scene` gives for the same model.
+    :func:`panel_deploy.pipeline.simulate_scene` gives for the same model.
     """
     settings = CollisionSettings.from_scene(scene)
     sim = scene.simulation

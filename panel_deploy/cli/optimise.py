@@ -1,27 +1,29 @@
-"""``panel-deploy optimise SCENE``: wiring of optimise, verify, snap, tolerance check."""
+"""``panel-deploy optimise SCENE``: wiring of optimise, verify, snap, tolerance check, record."""
 
 from __future__ import annotations
 
 import json
 import sys
 
-from .io import dump_result, load_stiffness, result_to_dict, save_result
-from .manufacture import snap_to_springs, tolerance_check, verify
+from ..build import build_model
+from ..errors import SceneError
+from ..optimise.io import dump_result, load_stiffness, result_to_dict, save_result
+from ..optimise.manufacture import snap_to_springs, tolerance_check, verify
+from ..optimise.search import optimise, print_progress
 from ..progress import Progress
-from .search import optimise, print_progress
+from .args import scene_of
 
 
-def optimise_command(args, scene) -> int:
-    """Run the optimisation a scene describes; exit code 0 if it found a feasible K
-    (collision-free, reaching flat) and the independent re-check of that K agrees, else 1.
-
-    ``args`` attributes (all optional except as noted; argparse flags in brackets):
+def optimise_command(args) -> int:
+    """Run the optimisation the scene describes (``--set`` and its aliases
+    ``--method``, ``--max-evaluations``, ``--workers`` applied); exit code 0 if
+    it found a feasible K (collision-free, reaching flat) and the independent
+    re-check of that K agrees, else 1; 130 when interrupted (the best K so far
+    is still written).
 
     - ``out`` [--out RESULT.yaml]: result file; without it the YAML goes to stdout.
-    - ``workers`` [--workers N]: local processes (0 all cores, 1 serial).
+    - ``record`` [--record FILE.mcap]: then record the deployment of the result.
     - ``dask`` [--dask ADDRESS]: Dask scheduler to run the evaluations on.
-    - ``method`` [--method local|global], ``max_evaluations`` [--max-evaluations N]:
-      override the scene.
     - ``start`` [--start RESULT.yaml]: start from this result's K instead of
       the scene's ``optimisation.k0`` (to go on from an earlier search).
     - ``springs`` [--springs 0.07,0.1]: available spring stiffnesses (N m/rad);
@@ -32,14 +34,25 @@ def optimise_command(args, scene) -> int:
     - ``quiet`` [--quiet]: no progress lines and no re-check line on stderr.
     - ``json`` [--json]: print a one-object JSON summary instead of the YAML.
     """
-    from ..build import build_model
+    if args.record and not args.out:
+        raise SceneError("--record", "needs --out RESULT.yaml: the recording deploys the K written there")
+    scene = scene_of(args)
+    code = optimise_scene(args, scene)
+    if args.record and code != 130:
+        from ..record.deployment import record_optimum
+        record_optimum(args.record, scene, args.out)
+        print(f"recorded the deployment of {args.out} -> {args.record}", file=sys.stderr)
+    return code
 
+
+def optimise_scene(args, scene) -> int:
+    """:func:`optimise_command` on a loaded ``scene``, without the recording."""
     def arg(name, default=None):
         return getattr(args, name, default)
 
     model = build_model(scene)
     quiet = arg("quiet", False)
-    budget = arg("max_evaluations") or scene.optimisation.max_evaluations
+    budget = scene.optimisation.max_evaluations
     with Progress(budget, "optimise", "evaluations", enabled=not quiet) as bar:
         def report(p):
             if bar.live:
@@ -47,10 +60,8 @@ def optimise_command(args, scene) -> int:
                            feasible="yes" if not p.collision and p.reached_flat else "no")
             else:
                 print_progress(p, sys.stderr)
-        result = optimise(model, scene, workers=arg("workers"),
-                          dask_address=arg("dask"), progress=None if quiet else report,
-                          method=arg("method"),
-                          max_evaluations=arg("max_evaluations"),
+        result = optimise(model, scene, dask_address=arg("dask"),
+                          progress=None if quiet else report,
                           k0=load_stiffness(arg("start"), model) if arg("start") else None)
     extra = {}
     if result.status == 3:
@@ -84,8 +95,7 @@ def optimise_command(args, scene) -> int:
         tol = 0.05 if tol is None else tol  # 0 is a request (exact copies), not "default"
         with Progress(n, "tolerance check", "copies", enabled=not quiet) as bar:
             report = tolerance_check(model, result.k, scene, c=result.c, n=n, stiffness_tol=tol,
-                                     damping_tol=tol, workers=arg("workers"),
-                                     dask_address=arg("dask"),
+                                     damping_tol=tol, dask_address=arg("dask"),
                                      progress=lambda done: bar.update(done - bar.done))
         extra["tolerance"] = report.to_dict()
         lo, hi = report.feasible_interval()

@@ -1,8 +1,11 @@
 """``panel-deploy``: the one command-line entry point; runs every main job without ROS.
 
-Each subcommand only wires scene -> model -> simulation -> collision ->
-optimisation together. Misuse (bad scene, bad arguments) prints one line
-``panel-deploy: error: <key path>: <what was wrong>`` and exits with code 2.
+The CLI layer: this package reads the command line and wires scene -> model
+-> simulation -> collision -> optimisation together, one module per
+subcommand; the library it calls takes typed parameters, never an argparse
+namespace. Misuse (bad scene, bad arguments) prints one line
+``panel-deploy: error: <key path>: <what was wrong>`` and exits with code 2,
+checked before any work starts (:mod:`panel_deploy.cli.checks`).
 """
 
 from __future__ import annotations
@@ -13,87 +16,23 @@ import signal
 import sys
 import threading
 
-from .errors import PanelDeployError, SceneError
+from ..errors import PanelDeployError
+from .args import add_set, alias
 
 
-def _load(args):
-    from .scene import load_scene, resolve_scene
-    return load_scene(resolve_scene(args.scene), getattr(args, "set", None) or ())
+def _command(module: str, name: str):
+    """The subcommand ``name`` of ``panel_deploy.cli.<module>``, imported when it runs
+    (a command's imports, numba's among them, cost only that command)."""
+    def run(args):
+        from importlib import import_module
+        return getattr(import_module(f"{__name__}.{module}"), name)(args)
+    return run
 
 
-def cmd_schema(args):
-    from .scene import describe_schema
+def _schema(args):
+    from ..scene import describe_schema
     print(describe_schema())
     return 0
-
-
-def cmd_fold(args):
-    from .fold.report import fold_command
-    if not args.scene:
-        if args.rows is None or args.cols is None:
-            raise SceneError("--rows/--cols", "give --rows and --cols, or --scene FILE")
-        return fold_command(args)
-    import json
-
-    from .build import scene_design
-    from .fold.report import design_dict, design_text
-
-    d = scene_design(_load(args))
-    print(json.dumps(design_dict(d), indent=1) if args.json else design_text(d))
-    if args.plot:
-        from .fold.plot import plot_design
-        plot_design(d, args.plot)
-    return 0 if d.stowed is not None else 1
-
-
-def cmd_simulate(args):
-    from .run import simulate_command
-    return simulate_command(args, _load(args))
-
-
-def cmd_collide(args):
-    from .collision import collide_command
-    return collide_command(args)
-
-
-def cmd_optimise(args):
-    from .optimise import optimise_command
-    if args.record and not args.out:
-        raise SceneError("--record", "needs --out RESULT.yaml: the recording deploys the K written there")
-    scene = _load(args)
-    code = optimise_command(args, scene)
-    if args.record and code != 130:
-        from .record.deployment import record_optimum
-        record_optimum(args.record, scene, args.out)
-        print(f"recorded the deployment of {args.out} -> {args.record}", file=sys.stderr)
-    return code
-
-
-def cmd_replay(args):
-    from .record.replay import replay_command
-    return replay_command(args)
-
-
-def cmd_export(args):
-    from .export import export_command
-    return export_command(args, _load(args))
-
-
-def cmd_bench(args):
-    from .bench import work_precision_command
-    return work_precision_command(args, _load(args))
-
-
-def cmd_run(args):
-    from .nodes import load
-    if not args.rate > 0:
-        raise SceneError("--rate", f"expected a rate > 0 Hz, got {args.rate}")
-    if not args.real_time_factor >= 0:
-        raise SceneError("--real-time-factor", f"expected a number >= 0, got {args.real_time_factor}")
-    scene = _load(args)  # a bad scene is one line here, before any node starts
-    return load("graph").run_graph(scene, optimise=args.optimise,
-                                   real_time_factor=args.real_time_factor, rate_hz=args.rate,
-                                   as_json=args.json, record=args.record)
 
 
 def _stiffness_list(text):
@@ -104,12 +43,6 @@ def _stiffness_list(text):
     if not values or any(not 0 < v < float("inf") for v in values):
         raise argparse.ArgumentTypeError(f"expected finite stiffnesses > 0 N m/rad, got {text!r}")
     return values
-
-
-def _add_set(parser):
-    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
-                        help="override a scene key, VALUE read as YAML "
-                             "(e.g. --set gravity=[0,0,0] --set simulation.t_end=3); repeatable")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -124,7 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("schema", help="print the scene schema (keys, types, units, defaults)")
-    s.set_defaults(func=cmd_schema)
+    s.set_defaults(func=_schema)
 
     s = sub.add_parser("fold", help="Hamiltonian circuits, two-stack packing, merging, DoF")
     s.add_argument("--rows", type=int)
@@ -134,8 +67,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--limit", type=int, help="list at most this many circuits (default 50)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.add_argument("--plot", metavar="FILE.png", help="draw the design and its stacks")
-    _add_set(s)
-    s.set_defaults(func=cmd_fold)
+    add_set(s)
+    s.set_defaults(func=_command("fold", "fold_command"))
 
     s = sub.add_parser("simulate", help="simulate one deployment and check it for collisions")
     s.add_argument("scene", help="scene YAML file, or the name of a shipped scene")
@@ -144,11 +77,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--record", metavar="FILE.mcap",
                    help="record the deployment as it is computed (ROS 2 MCAP: ros2 bag, Foxglove, rerun)")
     s.add_argument("--stiffness", metavar="RESULT.yaml", help="hinge stiffnesses from an optimisation result")
-    s.add_argument("--method", help="override simulation.method")
-    s.add_argument("--closure", choices=("penalty", "exact"), help="override closure.method")
-    s.add_argument("--t-end", type=float, help="override simulation.t_end (s)")
-    _add_set(s)
-    s.set_defaults(func=cmd_simulate)
+    alias(s, "--method", "simulation.method")
+    alias(s, "--closure", "closure.method")
+    alias(s, "--t-end", "simulation.t_end")
+    add_set(s)
+    s.set_defaults(func=_command("simulate", "simulate_command"))
 
     s = sub.add_parser("run", help="the ROS 2 node graph in one process: deploy (and optimise) live")
     s.add_argument("scene", help="scene YAML file, or the name of a shipped scene")
@@ -160,8 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--record", metavar="FILE.mcap",
                    help="record the graph's topics (and /tf) to MCAP, as ros2 bag record would")
     s.add_argument("--json", action="store_true", help="print the summary as one JSON object")
-    _add_set(s)
-    s.set_defaults(func=cmd_run)
+    add_set(s)
+    s.set_defaults(func=_command("run", "run_command"))
 
     s = sub.add_parser("collide", help="collision check of a saved trajectory or a recording")
     s.add_argument("trajectory", help="trajectory .npz written by simulate --out, or an MCAP "
@@ -169,16 +102,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--scene", help="the recording's scene (file or shipped name); default: "
                                    "its /panel_deploy/model")
     s.add_argument("--json", action="store_true")
-    s.set_defaults(func=cmd_collide)
+    s.set_defaults(func=_command("collide", "collide_command"))
 
     s = sub.add_parser("optimise", help="hinge stiffnesses for a collision-free deployment (Eq. 8)")
     s.add_argument("scene")
     s.add_argument("--out", metavar="RESULT.yaml", help="result file (default: print it)")
     s.add_argument("--record", metavar="FILE.mcap", help="record the deployment of the result (needs --out)")
-    s.add_argument("--workers", type=int, help="parallel evaluations (default: all cores)")
+    alias(s, "--workers", "optimisation.workers")
     s.add_argument("--dask", metavar="ADDRESS", help="run evaluations on this Dask scheduler")
-    s.add_argument("--method", choices=("local", "global"), help="override optimisation.method")
-    s.add_argument("--max-evaluations", type=int, help="override optimisation.max_evaluations")
+    alias(s, "--method", "optimisation.method")
+    alias(s, "--max-evaluations", "optimisation.max_evaluations")
     s.add_argument("--start", metavar="RESULT.yaml",
                    help="start from this result's K instead of optimisation.k0")
     s.add_argument("--springs", type=_stiffness_list,
@@ -188,8 +121,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="relative spread of k and c (default 0.05, with --perturb)")
     s.add_argument("--quiet", action="store_true", help="no progress lines")
     s.add_argument("--json", action="store_true", help="print the result as JSON")
-    _add_set(s)
-    s.set_defaults(func=cmd_optimise)
+    add_set(s)
+    s.set_defaults(func=_command("optimise", "optimise_command"))
 
     s = sub.add_parser("replay", help="replay a recording in rerun, or render it as a PNG strip")
     s.add_argument("recording", help="MCAP recording (simulate --record, run --record, ros2 bag record)")
@@ -204,13 +137,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="instants of the --png frames, s")
     s.add_argument("--scene", help="the recording's scene (file or shipped name); default: "
                                    "its /panel_deploy/model")
-    s.set_defaults(func=cmd_replay)
+    s.set_defaults(func=_command("replay", "replay_command"))
 
     s = sub.add_parser("export", help="export the model (MuJoCo MJCF)")
     s.add_argument("scene")
     s.add_argument("--mjcf", metavar="FILE.xml", required=True)
-    _add_set(s)
-    s.set_defaults(func=cmd_export)
+    add_set(s)
+    s.set_defaults(func=_command("export", "export_command"))
 
     s = sub.add_parser("bench", help="benchmarks")
     bsub = s.add_subparsers(dest="bench", required=True)
@@ -220,8 +153,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--plot", default="work_precision.png", help="log-log plot")
     b.add_argument("--repeats", type=int, default=3)
     b.add_argument("--quick", action="store_true", help="fewer tolerances and steps (< 2 min)")
-    _add_set(b)
-    b.set_defaults(func=cmd_bench)
+    add_set(b)
+    b.set_defaults(func=_command("bench", "work_precision_command"))
     return p
 
 
@@ -243,7 +176,7 @@ def main(argv=None) -> int:
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _interrupt)
     try:
-        from .cli_checks import check_args
+        from .checks import check_args
         check_args(args)  # every flag and output path, before any work
         return args.func(args) or 0
     except PanelDeployError as e:
@@ -256,6 +189,3 @@ def main(argv=None) -> int:
         print("panel-deploy: interrupted", file=sys.stderr)
         return 130
 
-
-if __name__ == "__main__":
-    sys.exit(main())

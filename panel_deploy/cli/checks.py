@@ -5,13 +5,15 @@ not the internal ``stiffness_tol``), and every output path is checked (its
 folder exists and is writable, it is not a folder) so that a long simulation
 or search never ends in an unwritable file. Options that would be ignored or
 that conflict are errors, not silently dropped. The rules themselves are in
-:mod:`panel_deploy.validate`, shared with the ROS nodes.
+:mod:`panel_deploy.validate`, shared with the ROS nodes; the flags that are
+aliases of ``--set`` (:mod:`panel_deploy.cli.args`) meet the scene's own
+validation instead.
 """
 
 from __future__ import annotations
 
-from .errors import SceneError
-from .validate import check_output_path, finite_number
+from ..errors import SceneError
+from ..validate import check_output_path, finite_number
 
 #: Largest array ``fold --rows R --cols C`` counts: the frontier count's time
 #: and memory grow about 3-4 fold per cell of the shorter side (12 x 12:
@@ -79,16 +81,7 @@ def _fold(args):
     _positive_int(args, "limit", "--limit", low=0)
 
 
-def _simulate(args):
-    from .scene import INTEGRATORS
-    if args.method is not None and args.method not in INTEGRATORS:
-        raise SceneError("--method", f"expected one of {', '.join(INTEGRATORS)}, got {args.method!r}")
-    finite_number(args.t_end, "--t-end", low=0, low_open=True)
-
-
 def _optimise(args):
-    _positive_int(args, "workers", "--workers", low=0)
-    _positive_int(args, "max_evaluations", "--max-evaluations", low=1)
     _positive_int(args, "perturb", "--perturb", low=0)
     tol = getattr(args, "perturb_tol", None)
     if tol is not None:
@@ -106,4 +99,4 @@ def _bench(args):
     _positive_int(args, "repeats", "--repeats", low=1)
 
 
-_CHECKS = {"fold": _fold, "simulate": _simulate, "optimise": _optimise, "bench": _bench}
+_CHECKS = {"fold": _fold, "optimise": _optimise, "bench": _bench}

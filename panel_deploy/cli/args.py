@@ -1,0 +1,67 @@
+"""The one way a command line changes a scene: ``--set KEY=VALUE``.
+
+The convenience flags (``--method``, ``--closure``, ``--t-end``,
+``--max-evaluations``, ``--workers``) are thin aliases: argparse appends them
+to ``--set`` as they come (the last of a flag and a ``--set`` of the same key
+wins, as two ``--set`` would), so they meet the scene's own validation and
+limits, the scene a run stores is the one it used, and an error names the flag
+the user typed.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from ..errors import SceneError
+
+
+class SceneKey(argparse.Action):
+    """``--flag VALUE`` as ``--set KEY=VALUE`` (VALUE read as YAML)."""
+
+    def __init__(self, option_strings, dest, key, **kwargs):
+        self.key = key
+        kwargs.setdefault("help", f"the same as --set {key}=VALUE")
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser, namespace, value, option_string=None):
+        if not str(value).strip():
+            parser.error(f"{option_string}: expected a value for {self.key}, got an empty string")
+        namespace.set = [*(getattr(namespace, "set", None) or ()), f"{self.key}={value}"]
+        namespace.aliases = {**(getattr(namespace, "aliases", None) or {}), self.key: option_string}
+        setattr(namespace, self.dest, value)
+
+
+def add_set(parser) -> None:
+    """``--set KEY=VALUE``, repeatable."""
+    parser.add_argument("--set", action="append", metavar="KEY=VALUE",
+                        help="override a scene key, VALUE read as YAML "
+                             "(e.g. --set gravity=[0,0,0] --set simulation.t_end=3); repeatable")
+
+
+def alias(parser, flag: str, key: str, **kwargs) -> None:
+    """``flag`` as a thin alias of ``--set key=VALUE``."""
+    parser.add_argument(flag, action=SceneKey, key=key, **kwargs)
+
+
+def scene_of(args, name_attr: str = "scene"):
+    """The scene ``args`` name (a file or a shipped scene's name), with the
+    ``--set`` items and their aliases applied.
+
+    Raises
+    ------
+    SceneError
+        As :func:`panel_deploy.scene.load_scene`; a bad value given by an
+        alias is named by that flag (``--t-end: ...``), not by ``--set``.
+    """
+    from ..scene import load_scene, resolve_scene
+
+    aliases = getattr(args, "aliases", None) or {}
+    try:
+        return load_scene(resolve_scene(getattr(args, name_attr)), getattr(args, "set", None) or ())
+    except SceneError as e:
+        flag = next((f for key, f in aliases.items()
+                     if str(e.path) == f"--set {key}" or str(e.path).startswith(f"--set {key}[")),
+                    None)
+        if flag is None:
+            raise
+        raise SceneError(flag, e.reason) from None

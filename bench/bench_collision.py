@@ -158,11 +158,11 @@ def stream_costs(scene, repeats):
     for rate, t_end in ((1000.0, 0.0), (200.0, 0.6)):
         streamed, model = configure(scene, DynamicsParameters(rate_hz=rate, t_end=t_end))
         result = simulate(model, streamed.simulation)
-        settings = CollisionSettings.from_scene(streamed)
-        StreamCheck(model, settings).update(result.t[0], result.theta[0], result.omega[0])  # compile
+        collision = CollisionSettings.from_scene(streamed)
+        StreamCheck(model, collision).update(result.t[0], result.theta[0], result.omega[0])  # compile
         runs = []
         for _ in range(max(1, repeats // 2)):
-            check = StreamCheck(model, settings)
+            check = StreamCheck(model, collision)
             d = np.empty(len(result.t))
             for j in range(len(result.t)):
                 t0 = time.perf_counter()
@@ -193,15 +193,15 @@ def check_costs(label, model, scene, repeats):
     print(f"\n{label}, {len(result.t)} samples: simulation {sim:.2f} s ({result.method}, "
           f"{result.message})")
     rep = None
-    for name, settings in (("refine on (default)", CollisionSettings.from_scene(scene)),
+    for name, collision in (("refine on (default)", CollisionSettings.from_scene(scene)),
                            ("refine off", CollisionSettings.from_scene(scene, refine=False)),
                            ("refine on, no broad phase", CollisionSettings.from_scene(scene, margin=math.inf)),
                            ("whole trajectory, refine off", None)):
-        if settings is None:
-            settings = CollisionSettings.from_scene(scene, refine=False)
-            fn = lambda: check_trajectory(model, result, settings, stop_at_first=False)  # noqa: E731
+        if collision is None:
+            collision = CollisionSettings.from_scene(scene, refine=False)
+            fn = lambda: check_trajectory(model, result, collision, stop_at_first=False)  # noqa: E731
         else:
-            fn = lambda: check_trajectory(model, result, settings)  # noqa: E731
+            fn = lambda: check_trajectory(model, result, collision)  # noqa: E731
         times = []
         for _ in range(max(1, repeats // 2)):
             t0 = time.perf_counter()
@@ -210,8 +210,8 @@ def check_costs(label, model, scene, repeats):
         med = statistics.median(times)
         print(f"  check {name:30s} {med:7.3f} s  ratio check/simulation {med / sim:.3f}  "
               f"samples {len(rep.t)}  {rep.counters}")
-    print("\n" + rep.summary())
-    print("\n" + check_trajectory(model, result, CollisionSettings.from_scene(scene)).summary())
+    print("\n" + rep.to_text())
+    print("\n" + check_trajectory(model, result, CollisionSettings.from_scene(scene)).to_text())
 
 if __name__ == "__main__":
     main()

@@ -86,7 +86,7 @@ def main(argv=None):
         start = time.perf_counter()
         result = simulate(model, variant.simulation)
         wall = time.perf_counter() - start
-        report = hinge_release_report(model, result, flat_tol=variant.simulation.flat_tolerance)
+        report = hinge_release_report(model, result, flat_tolerance=variant.simulation.flat_tolerance)
         name, at = last_release(report)
         gap = result.constraint_gap.max()
         print(f"{label:20s} {name:>24s} {when(at):>7s} {when(report['flat_at']):>11s} "

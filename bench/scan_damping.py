@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 from panel_deploy.build import build_model  # noqa: E402
 from panel_deploy.errors import PanelDeployError  # noqa: E402
 from panel_deploy.optimise import evaluate, load_stiffness, tolerance_check  # noqa: E402
-from panel_deploy.optimise.search import search_settings  # noqa: E402
+from panel_deploy.optimise.search import search_scene  # noqa: E402
 from panel_deploy.scene import load_scene, resolve_scene  # noqa: E402
 
 
@@ -63,7 +63,7 @@ def main(argv=None):
             model = build_model(scene)
             k = load_stiffness(args.stiffness, model) if args.stiffness else model.stiffness
             start = time.perf_counter()
-            ev = evaluate(model, k, search_settings(scene))
+            ev = evaluate(model, k, search_scene(scene))
             copies = tolerance_check(model, k, scene, n=args.copies, stiffness_tol=args.tol,
                                      damping_tol=args.tol, workers=args.workers)
         except PanelDeployError as e:

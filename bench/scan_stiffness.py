@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 from panel_deploy.bench import sampling  # noqa: E402
 from panel_deploy.errors import PanelDeployError  # noqa: E402
 from panel_deploy.optimise.parallel import Evaluator, Job, make_backend  # noqa: E402
-from panel_deploy.optimise.search import search_settings  # noqa: E402
+from panel_deploy.optimise.search import search_scene  # noqa: E402
 
 
 def main(argv=None):
@@ -42,7 +42,7 @@ def main(argv=None):
     except PanelDeployError as e:
         sys.exit(f"scan_stiffness: {e}")
     print(f"scene {scene.name}{' with ' + ', '.join(args.set) if args.set else ''}: {what}")
-    backend = make_backend(Job(model, search_settings(scene)), args.workers)
+    backend = make_backend(Job(model, search_scene(scene)), args.workers)
     start = time.perf_counter()
     try:
         evals = Evaluator(backend, args.n).map(ks)

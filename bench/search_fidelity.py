@@ -47,8 +47,8 @@ def with_rtol(scene, rtol, refine):
                          collision=replace(scene.collision, refine=refine))
 
 
-def run(model, settings, ks, workers):
-    backend = make_backend(Job(model, settings), workers)
+def run(model, scene, ks, workers):
+    backend = make_backend(Job(model, scene), workers)
     try:
         return [e.outcome for e in Evaluator(backend, len(ks)).map(ks)]
     finally:

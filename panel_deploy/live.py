@@ -325,9 +325,9 @@ class StreamCheck:
         Deployments seen.
     """
 
-    def __init__(self, model: Model, settings: CollisionSettings):
+    def __init__(self, model: Model, collision: CollisionSettings):
         self.model = model
-        self.settings = settings
+        self.collision = collision
         self.names = [model.hinges[h].name for h in hinge_order(model)]
         self.required = self.names[:model.n_coords]
         self.check = None
@@ -354,7 +354,7 @@ class StreamCheck:
             raise TrajectoryError(f"header.stamp: {t:.9g} s is not after the last sample "
                                   f"({self._last:.9g} s)")
         if self.check is None:
-            self.check = TrajectoryCheck(self.model, self.settings)
+            self.check = TrajectoryCheck(self.model, self.collision)
             self.deployments += 1
             self._first = t
         events = self.check.update(t, theta, omega)

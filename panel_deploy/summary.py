@@ -1,21 +1,21 @@
 """A deployment and its collision check as one JSON-able dict and as text.
 
 Numbers come from :mod:`panel_deploy.dynamics.report` and the collision report;
-this module only puts them together for the CLI (and later the nodes).
+this module only puts them together for the CLI, the nodes and recordings.
 """
 
 from __future__ import annotations
 
-from .dynamics import summary
-from .dynamics.report import FLAT_TOL
+from .dynamics import dynamics_summary
+from .dynamics.report import FLAT_TOLERANCE
 
 
-def deployment_summary(model, result, collision=None, *, flat_tol=FLAT_TOL) -> dict:
+def deployment_summary(model, result, collision=None, *, flat_tolerance=FLAT_TOLERANCE) -> dict:
     """Dynamics summary (hinge release times included) + closure + collision, JSON-ready.
 
-    ``flat_tol`` (rad): the scene's ``simulation.flat_tolerance``.
+    ``flat_tolerance`` (rad): the scene's ``simulation.flat_tolerance``.
     """
-    out = summary(model, result, flat_tol=flat_tol)
+    out = dynamics_summary(model, result, flat_tolerance=flat_tolerance)
     out.update(status=int(result.status),
                closure=model.closure.method if model.cut_hinges else "none")
     if collision is not None:
@@ -23,7 +23,7 @@ def deployment_summary(model, result, collision=None, *, flat_tol=FLAT_TOL) -> d
     return out
 
 
-def summary_text(s: dict) -> str:
+def deployment_text(s: dict) -> str:
     """The summary as a few lines of text."""
     def fmt(x, unit=""):
         return "never" if x is None else f"{x:.4g}{unit}"

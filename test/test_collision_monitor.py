@@ -72,7 +72,7 @@ def test_distances_match_closed_form_and_collision_time():
     j = e.sample
     assert traj.t[j - 1] < e.t <= traj.t[j]
     assert t_touch <= e.t <= t_touch + (traj.t[1] - traj.t[0])
-    assert e.distance < -rep.settings.tolerance
+    assert e.distance < -rep.collision.tolerance
     # Eq. (7) from the closed-form distances of the two samples before t_j
     D = sd_closed_form(traj.theta[[j - 2, j - 1], 0])
     assert rep.v == pytest.approx((D[0] - D[1]) / (traj.t[j - 1] - traj.t[j - 2]), abs=1e-6)
@@ -169,7 +169,7 @@ def test_tunnelling_between_samples_is_caught():
     assert e.sample == j + 1
     t_ref, step = reference_first_interference(model, traj, tol)
     assert t_ref is not None
-    assert abs(e.t - t_ref) <= step + 2 * rep.settings.time_resolution
+    assert abs(e.t - t_ref) <= step + 2 * rep.collision.time_resolution
 
 
 def test_a_touching_pair_pressing_in_between_samples_is_caught():
@@ -188,7 +188,7 @@ def test_a_touching_pair_pressing_in_between_samples_is_caught():
     assert rep.counters["contact_midpoints"] == 2
     t_ref, step = reference_first_interference(model, traj, tol)
     assert t_ref is not None
-    assert abs(e.t - t_ref) <= step + 2 * rep.settings.time_resolution
+    assert abs(e.t - t_ref) <= step + 2 * rep.collision.time_resolution
 
 
 def slit_model():
@@ -251,9 +251,9 @@ def test_stowed_paper_design_is_at_rest_without_collision():
         assert mon.update(t, s.theta, s.omega) == []
     touching = np.abs(mon.distances) < 1e-9
     assert touching.any()                              # the stacks touch by design
-    assert np.all(mon.distances >= -mon.settings.tolerance)
+    assert np.all(mon.distances >= -mon.collision.tolerance)
     assert np.all(mon.resting[touching])               # and are left out of d
-    assert mon.min_distance >= mon.settings.tolerance
+    assert mon.min_distance >= mon.collision.tolerance
     # Nothing has cleared the 8-layer package (h = 7 t + t = 0.04 m) yet: the stack
     # spacing is not d.
     assert mon.package_height == pytest.approx(8 * 0.005)
@@ -322,7 +322,7 @@ def test_resting_pairs_settled_without_an_exact_distance_keep_every_verdict():
     run = simulate(m, replace(scene.simulation, t_end=0.45, samples=91))
     mon = CollisionMonitor(m, CollisionSettings(margin=math.inf))
     boxes = BoxSet(m)
-    tol = mon.settings.tolerance
+    tol = mon.collision.tolerance
     settled = 0
     for j in range(len(run.t)):
         mon.update(run.t[j], run.theta[j], run.omega[j])
@@ -352,7 +352,7 @@ def test_a_resting_pair_whose_bounds_straddle_the_tolerance_gets_its_exact_dista
     from panel_deploy.collision.geometry import BoxSet, least_overlap
     m = fold_model()
     mon = CollisionMonitor(m, CollisionSettings(margin=math.inf, refine=False))
-    tol = mon.settings.tolerance
+    tol = mon.collision.tolerance
     Q = Rotation.from_euler("zx", [30, 20], degrees=True).as_matrix()
     R = np.array([np.eye(3), Q, Q])
     half = np.array([A, A, T]) / 2

@@ -118,7 +118,7 @@ def sequential_sample_distances(mon, boxes):
     b = boxes
     lb = b.lower_bounds(mon.pairs)
     D, exact, settled = lb.copy(), np.zeros(len(lb), bool), np.zeros(len(lb), bool)
-    tol = mon.settings.tolerance
+    tol = mon.collision.tolerance
     if mon.resting is not None:
         rows = np.flatnonzero(mon.resting)
         overlap, upper = pair_bounds(b.rotation, b.position, b.half, mon.pairs[rows, 0], mon.pairs[rows, 1])
@@ -131,7 +131,7 @@ def sequential_sample_distances(mon, boxes):
     counts = ~mon.flat_contact & (~mon.resting if mon.resting is not None else True)
     best, before = math.inf, b.exact_fallbacks
     for k in np.argsort(lb, kind="stable"):
-        if lb[k] > mon.settings.margin and lb[k] >= best:
+        if lb[k] > mon.collision.margin and lb[k] >= best:
             break
         if settled[k]:
             continue
@@ -172,7 +172,7 @@ class PythonSearch(CollisionMonitor):
         return sd, self._speed.radii(R, p)
 
     def _refine(self, prev, cur):
-        s = self.settings
+        s = self.collision
         threshold = -s.tolerance
         seg = _segment(prev, cur)
         last_touch = np.where(prev.distances >= 0.0, prev.t, np.nan)

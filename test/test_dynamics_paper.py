@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from panel_deploy.build import build_model
-from panel_deploy.dynamics import energy_balance_error, hinge_release_report, simulate, summary
+from panel_deploy.dynamics import energy_balance_error, hinge_release_report, simulate, dynamics_summary
 from panel_deploy.scene import load_scene
 
 SCENE = load_scene("config/scenes/paper_4x4.yaml")
@@ -26,7 +26,7 @@ def test_paper_scene_deploys_from_stowed(closure):
                                    rtol=1e-6, atol=1e-8)
     r = simulate(model, settings)
     report = hinge_release_report(model, r)
-    print(closure, summary(model, r))
+    print(closure, dynamics_summary(model, r))
     print(closure, {k: v["released_at"] for k, v in report["hinges"].items()}, "flat at", report["flat_at"])
     assert r.success, r.message
     assert np.all(np.isfinite(r.theta)) and np.all(np.isfinite(r.position))

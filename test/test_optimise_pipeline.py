@@ -149,9 +149,9 @@ def test_a_colliding_run_earns_no_clearance_on_the_paper_scene():
     # the 45 mm of clearance before K_0's collision must not be credited.
     from pathlib import Path
     from panel_deploy.build import build_model
-    from panel_deploy.optimise.search import search_settings
+    from panel_deploy.optimise.search import search_scene
     from panel_deploy.scene import load_scene
-    s = search_settings(load_scene(Path(__file__).resolve().parent.parent / "config" / "scenes"
+    s = search_scene(load_scene(Path(__file__).resolve().parent.parent / "config" / "scenes"
                                    / "paper_4x4.yaml", ["simulation.t_end=0.5"]))
     model = build_model(s)
     ev = evaluate(model, model.stiffness, s)

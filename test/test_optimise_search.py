@@ -358,13 +358,13 @@ def test_ctrl_c_returns_the_best_so_far_as_a_result(tmp_path):
     assert res.f == min(e.f for e in res.history)
 
 
-def test_search_settings_loosen_rtol_atol_and_refinement():
-    from panel_deploy.optimise.search import search_settings
+def test_search_scene_loosen_rtol_atol_and_refinement():
+    from panel_deploy.optimise.search import search_scene
     s = scene()
-    assert search_settings(s) == s                      # default: the scene's own
-    assert search_settings(scene(refine=False)).collision.refine is False
+    assert search_scene(s) == s                      # default: the scene's own
+    assert search_scene(scene(refine=False)).collision.refine is False
     loose = scene(rtol=1e-3)
-    sim = search_settings(loose).simulation
+    sim = search_scene(loose).simulation
     assert sim.rtol == 1e-3
     assert sim.atol / sim.rtol == pytest.approx(loose.simulation.atol / loose.simulation.rtol)
     with pytest.raises(Exception, match=r"optimisation\.rtol"):

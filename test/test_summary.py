@@ -1,6 +1,6 @@
 """The text summary of a deployment (panel_deploy.summary)."""
 
-from panel_deploy.summary import summary_text
+from panel_deploy.summary import deployment_text
 
 
 def summary(time_to_flat, t_collision):
@@ -13,13 +13,13 @@ def summary(time_to_flat, t_collision):
 
 
 def test_a_collision_after_the_first_flat_is_marked_as_after_the_deployment():
-    text = summary_text(summary(0.835, 0.8358))
+    text = deployment_text(summary(0.835, 0.8358))
     assert "first collision at 0.8358 s (after the array first lay flat" in text
 
 
 def test_a_collision_before_flat_or_without_flat_is_not():
     for flat in (0.9, None):
-        line = summary_text(summary(flat, 0.8358)).splitlines()[-1]
+        line = deployment_text(summary(flat, 0.8358)).splitlines()[-1]
         assert line.startswith("first collision at 0.8358 s between A and B")
 
 
@@ -29,7 +29,7 @@ def test_energy_balance_is_flagged_when_large_and_withheld_when_meaningless():
                          (0.26, "2.60e-01 (relative) -- LARGE (above 0.01)"),
                          (None, "energy balance error not meaningful")):
         s["energy_balance_error"] = error
-        assert shown in summary_text(s)
+        assert shown in deployment_text(s)
 
 
 def test_zero_energy_run_reports_no_balance_error(capsys):

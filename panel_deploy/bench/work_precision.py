@@ -316,7 +316,7 @@ def plot(report: WorkPrecision, path) -> None:
         plt.close(fig)
 
 
-def summary(report: WorkPrecision) -> str:
+def work_precision_text(report: WorkPrecision) -> str:
     """Text table and the time ratios against MuJoCo at 1e-3 and 1e-6 rad."""
     lines = [f"{'simulator':8} {'method':13} {'setting':>9} {'wall s':>9} {'nfev':>8} "
              f"{'steps':>8} {'max err':>9} {'final err':>9}  status"]

@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-from ..bench.work_precision import plot, work_precision, write_csv
-from ..bench.work_precision import summary as report_text
+from ..bench.work_precision import plot, work_precision, work_precision_text, write_csv
 from ..build import build_model
 from .args import scene_of
 
@@ -15,6 +14,6 @@ def work_precision_command(args) -> int:
                             quick=args.quick, repeats=args.repeats, verbose=True)
     write_csv(report, args.out)
     plot(report, args.plot)
-    print(report_text(report))
+    print(work_precision_text(report))
     print(f"wrote {args.out} and {args.plot}")
     return 0

@@ -44,5 +44,5 @@ def collide_command(args) -> int:
         if failed:
             print(f"the stored run FAILED at t = {result.t[-1]:.4g} s ({result.message}): "
                   "checked up to there")
-        print(report.summary())
+        print(report.to_text())
     return 0

@@ -8,7 +8,7 @@ import json
 from ..errors import DesignError, SceneError
 from ..fold import design, designs
 from ..fold.circuits import ENUMERATION_LIMIT, count_circuits
-from ..fold.report import design_dict, design_text, designs_summary, summary_text
+from ..fold.report import design_dict, design_text, designs_summary, designs_text
 from ..progress import Progress
 from .args import scene_of
 
@@ -58,7 +58,7 @@ def _list(rows, cols, limit, args) -> int:
         if plotted is None:
             raise SceneError("--plot", f"nothing to plot: the {rows} x {cols} array has no circuit")
         _plot(plotted, args.plot)
-    print(json.dumps(out, indent=1) if args.json else summary_text(out))
+    print(json.dumps(out, indent=1) if args.json else designs_text(out))
     return 0
 
 

@@ -73,7 +73,7 @@ def optimise_scene(args, scene) -> int:
             print(dump_result(result, scene.name, extra), end="")
         return 130
     check = verify(model, result.k, scene, c=result.c)
-    extra["verification"] = {"tighten": 10.0, "refine": 2, **check.summary()}
+    extra["verification"] = {"tighten": 10.0, "refine": 2, **check.to_dict()}
     lines = [verdict("re-check (rtol / 10, twice the samples)", check)]
     springs = arg("springs")
     if springs:
@@ -87,7 +87,7 @@ def optimise_scene(args, scene) -> int:
             "hinges": {name: {"k": float(k), "springs": list(s), "zeroed": bool(z)}
                        for name, k, s, z in zip(result.problem.hinge_names, snap.k,
                                                 snap.springs, snap.zeroed)},
-            **built.summary()}
+            **built.to_dict()}
         lines.append(verdict("snapped to the springs", built))
     n = arg("perturb")
     if n:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 
 from ..pipeline import scene_model, simulate_scene
-from ..summary import deployment_summary, summary_text
+from ..summary import deployment_summary, deployment_text
 from ..validate import first_non_finite_value
 from .args import scene_of
 
@@ -24,10 +24,10 @@ def simulate_command(args) -> int:
     if args.out:
         from ..trajectory_io import save_trajectory
         save_trajectory(args.out, result, scene, model)
-    summary = deployment_summary(model, result, report, flat_tol=scene.simulation.flat_tolerance)
+    summary = deployment_summary(model, result, report, flat_tolerance=scene.simulation.flat_tolerance)
     summary["scene"] = scene.name or scene.source
     bad = first_non_finite_value(summary)
     if bad is not None:  # a NaN is never an answer: the run counts as failed
         summary.update(success=False, message=f"non-finite result: {bad} ({summary['message']})")
-    print(json.dumps(summary, allow_nan=bad is not None) if args.json else summary_text(summary))
+    print(json.dumps(summary, allow_nan=bad is not None) if args.json else deployment_text(summary))
     return 0 if result.success and bad is None else 1

@@ -1,6 +1,6 @@
 """Collision detection between panels (paper section 3.2, Eq. 7).
 
-``check_trajectory(model, result, settings) -> CollisionReport`` checks a
+``check_trajectory(model, result, collision) -> CollisionReport`` checks a
 sampled trajectory (:class:`TrajectoryCheck` takes it in blocks as they are
 simulated); :class:`CollisionMonitor` does the same on a stream of joint
 states (``update(t, theta, omega=None) -> events``). What counts as a

@@ -35,7 +35,7 @@ class CollisionReport:
     distances : (s_c, P) ndarray
         Signed distance D_j of every pair, m (the paper's D_j is
         ``max(distances, 0)``); where ``exact`` is False, a lower bound above
-        ``settings.margin`` (broad phase).
+        ``collision.margin`` (broad phase).
     exact : (s_c, P) ndarray of bool
     n_valid : int
         Samples before the first collision (all if none): rows ``[:n_valid]``
@@ -58,7 +58,8 @@ class CollisionReport:
     d_time : float
     d_pair : (str, str) or None
     counters : dict
-    settings : CollisionSettings
+    collision : CollisionSettings
+        What the check used.
     wall_time : float
         s spent in the check.
     """
@@ -77,7 +78,7 @@ class CollisionReport:
     d_time: float
     d_pair: tuple | None
     counters: dict
-    settings: CollisionSettings
+    collision: CollisionSettings
     wall_time: float = 0.0
     flat_contact: np.ndarray = field(default=None, repr=False)
 
@@ -112,8 +113,8 @@ class CollisionReport:
             "valid_samples": int(self.n_valid),
             "valid_until": None if math.isnan(self.valid_until) else self.valid_until,
             "pairs_checked": int(len(self.pairs)),
-            "tolerance": self.settings.tolerance,
-            "refine": self.settings.refine,
+            "tolerance": self.collision.tolerance,
+            "refine": self.collision.refine,
             "counters": dict(self.counters),
             "wall_time": self.wall_time,
         }
@@ -122,7 +123,7 @@ class CollisionReport:
                        distances=self.distances.tolist(), exact=self.exact.tolist())
         return out
 
-    def summary(self) -> str:
+    def to_text(self) -> str:
         """A few lines of text for the command line."""
         lines = []
         if self.first_collision is None:
@@ -148,15 +149,15 @@ class CollisionReport:
         return "\n".join(lines)
 
 
-def _settings(settings) -> CollisionSettings:
-    if settings is None:
+def _collision_settings(collision) -> CollisionSettings:
+    if collision is None:
         return CollisionSettings()
-    if isinstance(settings, CollisionSettings):
-        return settings
-    return CollisionSettings.from_scene(settings)
+    if isinstance(collision, CollisionSettings):
+        return collision
+    return CollisionSettings.from_scene(collision)
 
 
-def check_trajectory(model: Model, result, settings=None, *, stop_at_first: bool = True) -> CollisionReport:
+def check_trajectory(model: Model, result, collision=None, *, stop_at_first: bool = True) -> CollisionReport:
     """Distances D_j, first collision, V_j, v and d of a sampled trajectory.
 
     Parameters
@@ -166,7 +167,7 @@ def check_trajectory(model: Model, result, settings=None, *, stop_at_first: bool
     result : SimulationResult
         Uses ``t``, ``theta`` and ``omega``; a failed run is checked over
         the samples it has.
-    settings : CollisionSettings, CollisionSection or Scene, optional
+    collision : CollisionSettings, CollisionSection or Scene, optional
     stop_at_first : bool
         Stop at the sample that reveals the first collision (the rest is
         invalid). False checks every sample (``events`` then still holds
@@ -176,7 +177,7 @@ def check_trajectory(model: Model, result, settings=None, *, stop_at_first: bool
     -------
     CollisionReport
     """
-    check = TrajectoryCheck(model, settings, capacity=len(result.t))
+    check = TrajectoryCheck(model, collision, capacity=len(result.t))
     check.feed(result, stop_at_first=stop_at_first)
     return check.report()
 
@@ -190,15 +191,15 @@ class TrajectoryCheck:
     Parameters
     ----------
     model : Model
-    settings : CollisionSettings, CollisionSection or Scene, optional
+    collision : CollisionSettings, CollisionSection or Scene, optional
     capacity : int
         Samples to preallocate D_j for (it grows when exceeded).
     """
 
-    def __init__(self, model: Model, settings=None, capacity: int = 64):
+    def __init__(self, model: Model, collision=None, capacity: int = 64):
         self._start = time.perf_counter()
-        self.settings = _settings(settings)
-        self.monitor = CollisionMonitor(model, self.settings)
+        self.collision = _collision_settings(collision)
+        self.monitor = CollisionMonitor(model, self.collision)
         P = len(self.monitor.pairs)
         self._t = np.empty(capacity)
         self._D = np.empty((capacity, P))
@@ -262,5 +263,5 @@ class TrajectoryCheck:
             events=self.first_events, V=V, v=float(V.max()) if self.first_events else 0.0,
             d=self.d, d_time=self.d_time, d_pair=self.d_pair,
             counters=dict(m.counters, exact_fallbacks=m.exact_fallbacks),
-            settings=self.settings, wall_time=time.perf_counter() - self._start,
+            collision=self.collision, wall_time=time.perf_counter() - self._start,
             flat_contact=m.flat_contact)

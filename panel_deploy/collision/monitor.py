@@ -220,7 +220,7 @@ class CollisionMonitor:
         Pairs with sd < -tolerance at the last update.
     distances : (P,) ndarray
         Signed distances at the last update, m; where ``exact`` is False a
-        lower bound, above ``settings.margin`` or, for a resting pair, one that
+        lower bound, above ``collision.margin`` or, for a resting pair, one that
         decides its collision, touching and release as the exact one would.
     exact : (P,) ndarray of bool
     min_distance : float
@@ -236,9 +236,9 @@ class CollisionMonitor:
         touching pairs were checked at the mid-point), exact_fallbacks.
     """
 
-    def __init__(self, model: Model, settings: CollisionSettings | None = None):
+    def __init__(self, model: Model, collision: CollisionSettings | None = None):
         self.model = model
-        self.settings = settings or CollisionSettings()
+        self.collision = collision or CollisionSettings()
         self.pairs = np.array(model.collision_pairs, dtype=int).reshape(-1, 2)
         self._a, self._b = (np.ascontiguousarray(self.pairs[:, k], dtype=np.int64) for k in (0, 1))
         self._packed = pack(model)
@@ -251,7 +251,7 @@ class CollisionMonitor:
         self._stack = stack(16, len(self.pairs), model.n_bodies, model.n_coords)
         flat = np.zeros(model.n_coords)
         rows = np.arange(len(self.pairs))
-        self.flat_contact = self._distances_at(flat, rows) <= self.settings.tolerance
+        self.flat_contact = self._distances_at(flat, rows) <= self.collision.tolerance
         self.resting = None
         self._release = np.zeros(len(self.pairs))
         self.package_height = math.nan
@@ -325,11 +325,11 @@ class CollisionMonitor:
             self._release = D + self.package_height
             self.resting = D <= self.package_height
         # The hinge-line radii only bound the motion between samples.
-        radii = self._speed.radii(R, p) if self.settings.refine else None
+        radii = self._speed.radii(R, p) if self.collision.refine else None
         cur = _Sample(t, theta, omega, D, exact, linear, radii)
 
-        tol = self.settings.tolerance
-        if prev is not None and self.settings.refine:
+        tol = self.collision.tolerance
+        if prev is not None and self.collision.refine:
             found = self._refine(prev, cur)
         else:
             found = {int(k): (t, None) for k in np.flatnonzero((D < -tol) & ~self.colliding)}
@@ -373,9 +373,9 @@ class CollisionMonitor:
         resting = self.resting if self.resting is not None else np.zeros(len(lb), dtype=bool)
         D, exact, rows, counts = _sample_plan(b.rotation, b.position, b.half, self._a, self._b, lb,
                                               np.argsort(lb, kind="stable"), resting, self._release,
-                                              self.flat_contact, self.settings.tolerance, self.settings.margin)
+                                              self.flat_contact, self.collision.tolerance, self.collision.margin)
         sd, wrong = b.signed_distances(self._a[rows], self._b[rows])
-        n = _kept(lb[rows], counts[rows], sd, self.settings.margin)
+        n = _kept(lb[rows], counts[rows], sd, self.collision.margin)
         D[rows[:n]], exact[rows[:n]] = sd[:n], True
         self._sample_fallbacks += int(np.count_nonzero(wrong[:n]))
         self.counters["exact_pairs"] += int(exact.sum())
@@ -393,7 +393,7 @@ class CollisionMonitor:
         one compiled call, :func:`.refine.refine_interval`; the few pairs it
         finds are then located here.
         """
-        s = self.settings
+        s = self.collision
         seg = _segment(prev, cur)
         while True:
             found_t, last_touch, order, pressed, steps, midpoint = refine_interval(
@@ -420,7 +420,7 @@ class CollisionMonitor:
     def _bisect(self, seg, k, lo, hi, level):
         """(lo, hi) within ``time_resolution`` of where pair k's sd falls below ``level``,
         given sd(lo) >= level > sd(hi); with the search's poses and distances."""
-        while hi - lo > self.settings.time_resolution:
+        while hi - lo > self.collision.time_resolution:
             mid = 0.5 * (lo + hi)
             R, p = poses(self._geo, seg.coefficients, mid)
             a, b = self._a[k], self._b[k]

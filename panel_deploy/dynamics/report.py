@@ -15,7 +15,7 @@ from .result import SimulationResult
 RELEASE_TOL = 1e-2
 #: The array is flat once every hinge (cut hinges included) has |theta| at most
 #: this, rad: the default of the scene's ``simulation.flat_tolerance``.
-FLAT_TOL = SimulationSection.flat_tolerance
+FLAT_TOLERANCE = SimulationSection.flat_tolerance
 
 
 def hinge_order(model: Model) -> list:
@@ -96,7 +96,7 @@ def balance_error(result: SimulationResult) -> float | None:
 
 
 def hinge_release_report(model: Model, result: SimulationResult, *, release_tol=RELEASE_TOL,
-                         flat_tol=FLAT_TOL) -> dict:
+                         flat_tolerance=FLAT_TOLERANCE) -> dict:
     """When each hinge leaves its stowed angle, and when the array first lies flat.
 
     Times are sample instants t_j (so resolved to the sample spacing), s.
@@ -105,9 +105,9 @@ def hinge_release_report(model: Model, result: SimulationResult, *, release_tol=
     -------
     dict with
         "hinges": {name: {"released_at": float or None, "final": rad}},
-        "flat_at": float or None (first t_j with all |theta| <= flat_tol),
+        "flat_at": float or None (first t_j with all |theta| <= flat_tolerance),
         "locked": names of hinges that never left their stowed angle,
-        "release_tol", "flat_tol".
+        "release_tol", "flat_tolerance".
     """
     names, idx, theta = hinge_angles(model, result)
     stowed = np.array([model.hinges[h].theta_stowed for h in idx])
@@ -116,19 +116,19 @@ def hinge_release_report(model: Model, result: SimulationResult, *, release_tol=
         hinges[name] = {"released_at": first_time(result.t, np.abs(theta[:, k] - stowed[k]) > release_tol),
                         "final": float(theta[-1, k])}
     return {"hinges": hinges,
-            "flat_at": first_time(result.t, np.all(np.abs(theta) <= flat_tol, axis=1)),
+            "flat_at": first_time(result.t, np.all(np.abs(theta) <= flat_tolerance, axis=1)),
             "locked": [nm for nm, h in hinges.items() if h["released_at"] is None],
-            "release_tol": release_tol, "flat_tol": flat_tol}
+            "release_tol": release_tol, "flat_tolerance": flat_tolerance}
 
 
-def summary(model: Model, result: SimulationResult, *, flat_tol=FLAT_TOL) -> dict:
-    """One-dict summary of a run for the CLI (SI units, JSON-ready); ``flat_tol`` in rad."""
+def dynamics_summary(model: Model, result: SimulationResult, *, flat_tolerance=FLAT_TOLERANCE) -> dict:
+    """One-dict summary of a run for the CLI (SI units, JSON-ready); ``flat_tolerance`` in rad."""
     names, _, theta = hinge_angles(model, result)
-    report = hinge_release_report(model, result, flat_tol=flat_tol)
+    report = hinge_release_report(model, result, flat_tolerance=flat_tolerance)
     return {
         "success": bool(result.success), "message": result.message, "method": result.method,
         "t_end": float(result.t[-1]), "time_to_flat": report["flat_at"],
-        "flat_tolerance": flat_tol,
+        "flat_tolerance": flat_tolerance,
         "final_angles": dict(zip(names, map(float, theta[-1]))),
         "release_times": {n: h["released_at"] for n, h in report["hinges"].items()},
         "locked_hinges": report["locked"],

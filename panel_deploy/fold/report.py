@@ -173,7 +173,7 @@ def designs_summary(rows: int, cols: int, limit: int = 50, progress=None) -> dic
     }
 
 
-def summary_text(s: dict) -> str:
+def designs_text(s: dict) -> str:
     """A human-readable form of :func:`designs_summary`."""
     lines = [f"{s['rows']} x {s['cols']} array: {s['circuits']} Hamiltonian circuits"]
     if s["orbits"] is not None:

@@ -36,7 +36,7 @@ class CollisionMonitorNode(Node):
     def __init__(self, **kwargs):
         super().__init__("collision_monitor", **kwargs)
         runtime.declare(self, PARAMETERS)
-        runtime.validator(self, lambda changes: self._settings(changes))
+        runtime.validator(self, lambda changes: self._collision(changes))
         self.add_post_set_parameters_callback(self._apply)
         self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", messages.EVENTS)
         self.events = self.create_publisher(DiagnosticArray, "/panel_deploy/collision_events",
@@ -50,7 +50,7 @@ class CollisionMonitorNode(Node):
         self.scene = None
         self.stream = None  # StreamCheck of the current model
 
-    def _settings(self, changes=None) -> CollisionSettings:
+    def _collision(self, changes=None) -> CollisionSettings:
         p = {**runtime.values(self, PARAMETERS), **(changes or {})}
         section = self.scene.collision if self.scene is not None else CollisionSettings()
         tolerance = section.tolerance if p["tolerance"] < 0 else p["tolerance"]
@@ -61,12 +61,12 @@ class CollisionMonitorNode(Node):
 
     def _apply(self, params):
         if self.stream is not None:  # from the next deployment on
-            self.stream.settings = self._settings()
+            self.stream.collision = self._collision()
 
     def _on_model(self, msg):
         try:
             self.scene = scene_from_yaml(msg.data)
-            self.stream = StreamCheck(build_model(self.scene), self._settings())
+            self.stream = StreamCheck(build_model(self.scene), self._collision())
         except PanelDeployError as e:
             self._warn(f"ignored a model: {e}")
 

@@ -103,7 +103,7 @@ class DynamicsNode(runtime.WorkerNode):
                 shown = now
         published = time.monotonic() - start
         result = deployment.result
-        self.summary = deployment_summary(model, result, flat_tol=scene.simulation.flat_tolerance)
+        self.summary = deployment_summary(model, result, flat_tolerance=scene.simulation.flat_tolerance)
         s = self.summary
         level = messages.OK if result.success and s["time_to_flat"] is not None else (
             messages.WARN if result.success else messages.ERROR)

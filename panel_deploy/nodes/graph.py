@@ -22,7 +22,7 @@ from std_srvs.srv import Trigger
 
 from ..live import scene_yaml
 from ..record.deployment import outcome_record
-from ..summary import deployment_summary, summary_text
+from ..summary import deployment_summary, deployment_text
 from . import messages, runtime
 from .array_model import ArrayModelNode
 from .collision_monitor import CollisionMonitorNode
@@ -118,7 +118,7 @@ class Driver(Node):
         check = monitor.stream.check if monitor.stream is not None else None
         report = check.report() if check is not None else None
         s = deployment_summary(deployment.model, deployment.result, report,
-                               flat_tol=deployment.settings.flat_tolerance)
+                               flat_tolerance=deployment.settings.flat_tolerance)
         first = report.first_collision if report is not None else None
         flat = s["time_to_flat"]
         collided_before_flat = first is not None and (flat is None or first.t <= flat)
@@ -194,7 +194,7 @@ def _run(scene_file, optimise, real_time_factor, rate_hz, as_json, record) -> in
         print(f"panel-deploy: error: {failure[0]}", file=sys.stderr)
         return 1
     if driver.summary is not None:
-        print(json.dumps(driver.summary) if as_json else summary_text(driver.summary))
+        print(json.dumps(driver.summary) if as_json else deployment_text(driver.summary))
     if interrupted.is_set() or driver.summary is None:
         print("panel-deploy: interrupted", file=sys.stderr)
         return 130

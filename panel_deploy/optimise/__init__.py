@@ -5,12 +5,12 @@ Public API::
 
     optimise(model, scene, *, k0=None, groups=None, workers=None, dask_address=None, progress=None, ...)
         -> OptimisationResult
-    evaluate(model, k, settings, *, c=None) -> Evaluation
+    evaluate(model, k, scene, *, c=None) -> Evaluation
     objective(outcome, p, q, flat_weight) -> float
     save_result(result, path, scene_name="", extra=None) / load_stiffness(path, model)
     snap_to_springs(k, springs, *, max_parallel=2, zero_ratio=10.0, mode="up")
-    verify(model, k, settings, *, tighten=10.0, refine=2) -> Evaluation
-    tolerance_check(model, k, settings, *, n=20, stiffness_tol=0.05, damping_tol=0.05)
+    verify(model, k, scene, *, tighten=10.0, refine=2) -> Evaluation
+    tolerance_check(model, k, scene, *, n=20, stiffness_tol=0.05, damping_tol=0.05)
 """
 
 from .evaluate import FLAT_TOLERANCE, Evaluation, Outcome, damping_ratio, evaluate, objective, run_deployment

@@ -15,12 +15,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..dynamics.report import FLAT_TOL, hinge_angles
+from ..dynamics.report import FLAT_TOLERANCE, hinge_angles
 from ..errors import OptimisationError
-
-#: Default largest |theta| (rad) of every hinge at which the array counts as
-#: flat: the scene's ``simulation.flat_tolerance`` unless the scene sets it.
-FLAT_TOLERANCE = FLAT_TOL
 
 #: Approach speed (m/s) charged to a run whose simulation failed: faster than
 #: any approach seen in the paper scene (tip speeds stay below ~3 m/s), so a
@@ -98,7 +94,7 @@ class Evaluation:
     f: float
     outcome: Outcome = field(repr=False)
 
-    def summary(self) -> dict:
+    def to_dict(self) -> dict:
         """Plain-Python summary (for YAML/JSON)."""
         o = self.outcome
         return {"f": float(self.f), "v": float(o.v), "d": float(o.d),
@@ -173,22 +169,22 @@ def damping_ratio(model) -> np.ndarray:
 SEGMENT_SAMPLES = 20
 
 
-def run_deployment(model, settings) -> Outcome:
+def run_deployment(model, scene) -> Outcome:
     """Simulate ``model`` from the stowed state, checking for collisions as it goes.
 
     The run stops at the first collision (the trajectory after it is invalid,
     paper section 3.2) or when the array first lies flat (the paper counts a
     deployment complete then, section 4; the swinging about flat that follows
     is not checked), so a colliding K costs only the time up to its collision.
-    ``settings`` is a :class:`~panel_deploy.scene.Scene` (its ``simulation``
+    ``scene`` is a :class:`~panel_deploy.scene.Scene` (its ``simulation``
     and ``collision`` sections are used).
     """
     from ..collision import TrajectoryCheck
     from ..dynamics import simulate_segments
 
     start = time.perf_counter()
-    sim = settings.simulation
-    check = TrajectoryCheck(model, settings.collision, capacity=sim.samples)
+    sim = scene.simulation
+    check = TrajectoryCheck(model, scene.collision, capacity=sim.samples)
     closest = math.inf
     result = None
     for result in simulate_segments(model, sim, segment_samples=SEGMENT_SAMPLES):
@@ -218,7 +214,7 @@ def run_deployment(model, settings) -> Outcome:
         flat_tolerance=sim.flat_tolerance)
 
 
-def evaluate(model, k, settings, *, c=None, evaluation=run_deployment) -> Evaluation:
+def evaluate(model, k, scene, *, c=None, evaluation=run_deployment) -> Evaluation:
     """Score one stiffness set.
 
     Parameters
@@ -227,14 +223,14 @@ def evaluate(model, k, settings, *, c=None, evaluation=run_deployment) -> Evalua
         The base model; it is not changed.
     k : (n_hinges,) array_like
         Stiffness of every hinge, N m/rad.
-    settings : Scene
+    scene : Scene
         ``simulation``, ``collision`` and ``optimisation`` (p, q,
         flat_weight) sections.
     c : (n_hinges,) array_like, optional
         Damping, N m s/rad; by default ``c = beta k`` with beta the base
         model's :func:`damping_ratio` (Rayleigh damping, paper section 3.3).
     evaluation : callable, optional
-        ``evaluation(model, settings) -> Outcome``, a picklable top-level
+        ``evaluation(model, scene) -> Outcome``, a picklable top-level
         function; :func:`run_deployment` by default.
 
     Returns
@@ -244,7 +240,7 @@ def evaluate(model, k, settings, *, c=None, evaluation=run_deployment) -> Evalua
     k = np.asarray(k, dtype=float)
     c = damping_ratio(model) * k if c is None else np.asarray(c, dtype=float)
     # The scene's flat criterion judges every run, whatever a hook filled in.
-    outcome = replace(evaluation(model.with_stiffness(k, c), settings),
-                      flat_tolerance=settings.simulation.flat_tolerance)
-    opt = settings.optimisation
+    outcome = replace(evaluation(model.with_stiffness(k, c), scene),
+                      flat_tolerance=scene.simulation.flat_tolerance)
+    opt = scene.optimisation
     return Evaluation(k, c, objective(outcome, opt.p, opt.q, opt.flat_weight), outcome)

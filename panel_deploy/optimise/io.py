@@ -66,8 +66,8 @@ def result_to_dict(result, scene_name: str = "", extra: dict | None = None) -> d
            else [float(b) for b in result.problem.damping_bounds],
            "damping_window": None if result.damping_window is None
            else [float(b) for b in result.damping_window]}
-    out.update(result.best.summary())
-    out["initial"] = result.initial.summary() if result.initial is not None else None
+    out.update(result.best.to_dict())
+    out["initial"] = result.initial.to_dict() if result.initial is not None else None
     out.update(success=bool(result.success), status=int(result.status), message=result.message,
                nfev=int(result.nfev), nit=int(result.nit), nstarts=int(result.nstarts),
                method=result.method, wall_time=round(float(result.wall_time), 3),

@@ -112,15 +112,15 @@ def snap_to_springs(k, springs, *, max_parallel=2, zero_ratio=10.0, mode="up") -
     return SpringAssignment(out_k, tuple(out_springs), zeroed, capped)
 
 
-def verify(model, k, settings, *, tighten=10.0, refine=2, c=None, evaluation=run_deployment):
+def verify(model, k, scene, *, tighten=10.0, refine=2, c=None, evaluation=run_deployment):
     """Re-simulate K independently: tolerances / ``tighten``, samples x ``refine``.
 
     Returns the :class:`~panel_deploy.optimise.evaluate.Evaluation` under
     the tighter settings (rtol and atol divided by ``tighten``, max_step
     unchanged, ``(samples - 1) * refine + 1`` samples).
     """
-    sim = settings.simulation
-    finer = settings.replace(simulation=replace(
+    sim = scene.simulation
+    finer = scene.replace(simulation=replace(
         sim, rtol=sim.rtol / tighten, atol=sim.atol / tighten,
         samples=(sim.samples - 1) * int(refine) + 1))
     return evaluate(model, k, finer, c=c, evaluation=evaluation)
@@ -159,7 +159,7 @@ class ToleranceReport:
                 "feasible": self.feasible, "feasible_interval_95": list(self.feasible_interval())}
 
 
-def tolerance_check(model, k, settings, *, c=None, n=20, stiffness_tol=0.05, damping_tol=0.05,
+def tolerance_check(model, k, scene, *, c=None, n=20, stiffness_tol=0.05, damping_tol=0.05,
                     seed=0, workers=None, dask_address=None,
                     evaluation=run_deployment, progress=None) -> ToleranceReport:
     """Re-simulate ``n`` copies of K with every k and c off by up to the tolerances.
@@ -181,8 +181,8 @@ def tolerance_check(model, k, settings, *, c=None, n=20, stiffness_tol=0.05, dam
     rng = np.random.default_rng(seed)
     ks = [k * (1 + rng.uniform(-stiffness_tol, stiffness_tol, k.shape)) for _ in range(n)]
     cs = [c * (1 + rng.uniform(-damping_tol, damping_tol, c.shape)) for _ in range(n)]
-    backend = make_backend(Job(model, settings, evaluation),
-                           settings.optimisation.workers if workers is None else workers,
+    backend = make_backend(Job(model, scene, evaluation),
+                           scene.optimisation.workers if workers is None else workers,
                            dask_address)
     # Batches of a few per worker: enough to keep them busy, small enough to report.
     batch = 2 * max(1, getattr(backend, "workers", 1))

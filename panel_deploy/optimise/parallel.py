@@ -28,13 +28,13 @@ class Job:
     """What every evaluation of one optimisation shares (sent once per worker)."""
 
     model: object
-    settings: object
+    scene: object
     evaluation: Callable = run_deployment
 
 
 def evaluate_job(job: Job, k, c=None) -> Evaluation:
     """:func:`~panel_deploy.optimise.evaluate.evaluate` for one K of ``job``."""
-    return evaluate(job.model, k, job.settings, c=c, evaluation=job.evaluation)
+    return evaluate(job.model, k, job.scene, c=c, evaluation=job.evaluation)
 
 
 _WORKER_JOB = None

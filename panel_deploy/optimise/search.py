@@ -170,7 +170,7 @@ def optimise(model, scene, *, k0=None, groups=None, workers=None, dask_address=N
         ``optimisation`` gives p, q, flat_weight, bounds, k0,
         damping_ratio_bounds, method, restarts, max_evaluations, workers,
         seed, rtol, refine;
-        ``simulation`` and ``collision``, as :func:`search_settings`
+        ``simulation`` and ``collision``, as :func:`search_scene`
         adjusts them, are used for every evaluation.
     k0 : float, (n_groups,) or (n_hinges,) array_like, optional
         Starting stiffness (N m/rad): one value, one per group, or one per
@@ -213,7 +213,7 @@ def optimise(model, scene, *, k0=None, groups=None, workers=None, dask_address=N
     problem = StiffnessProblem.from_model(model, opt.bounds, opt.k0 if k0 is None else k0,
                                           groups, opt.damping_ratio_bounds)
     rng = np.random.default_rng(opt.seed)
-    backend = make_backend(Job(model, search_settings(scene), evaluation),
+    backend = make_backend(Job(model, search_scene(scene), evaluation),
                            opt.workers if workers is None else workers, dask_address)
     search = _Search(problem, backend, opt.max_evaluations, progress, stop)
     start = time.perf_counter()
@@ -224,8 +224,8 @@ def optimise(model, scene, *, k0=None, groups=None, workers=None, dask_address=N
     return search.result(opt.method, converged, time.perf_counter() - start)
 
 
-def search_settings(settings):
-    """``settings`` as the search evaluates them: ``optimisation.rtol`` and
+def search_scene(scene):
+    """``scene`` as the search evaluates it: ``optimisation.rtol`` and
     ``optimisation.refine`` in place of the scene's own (None keeps them).
 
     Looser settings than the scene's can pay in the search, since the caller
@@ -240,12 +240,12 @@ def search_settings(settings):
     verdict, so that scene searches at its own rtol. atol keeps its ratio to
     rtol.
     """
-    sim, col, opt = settings.simulation, settings.collision, settings.optimisation
+    sim, col, opt = scene.simulation, scene.collision, scene.optimisation
     if opt.rtol is not None:
         sim = replace(sim, rtol=opt.rtol, atol=sim.atol * opt.rtol / sim.rtol)
     if opt.refine is not None:
         col = replace(col, refine=opt.refine)
-    return settings.replace(simulation=sim, collision=col)
+    return scene.replace(simulation=sim, collision=col)
 
 
 class _Search:

@@ -122,7 +122,7 @@ def record_deployment(path, scene, model):
                                   m.diagnostics(s.t, *(m.event_status(e) for e in events)), ns)
         result = deployment.result
         report = check.check.report()
-        summary = deployment_summary(model, result, report, flat_tol=sim.flat_tolerance)
+        summary = deployment_summary(model, result, report, flat_tolerance=sim.flat_tolerance)
         level, text, values = check.verdict()
         t_end = float(result.t[-1])
         rec.write("/diagnostics", m.DIAGNOSTIC_ARRAY, m.diagnostics(

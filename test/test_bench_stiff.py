@@ -34,14 +34,15 @@ def outcomes():
                            reference_rtol=1e-8)
 
 
-def test_every_run_succeeds_or_fails_loudly(outcomes):
-    assert len(outcomes) >= len(CASES) * len(METHODS)
+def test_every_run_succeeds_except_explicit_on_the_overdamped_penalty(outcomes):
+    assert len(outcomes) == len(CASES) * len(METHODS)
     assert not [o for o in outcomes if o.method == "reference"]  # every reference converged
     for o in outcomes:
-        assert o.status in ("ok", "FAIL"), o
-        if o.status == "FAIL":
-            assert o.message and "reached t_end" not in o.message
+        if (o.case, o.method) == ("k_M=1e8 c_M=2e4", "RK45"):
+            # fails loudly: a status and a message, not a NaN trajectory
+            assert o.status == "FAIL" and "step budget (1500) exhausted" in o.message, o
         else:
+            assert o.status == "ok", o
             assert math.isfinite(o.error) and o.error >= 0.0, o
             assert o.nfev > 0
 

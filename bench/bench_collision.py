@@ -24,20 +24,17 @@ from __future__ import annotations
 import argparse
 import math
 import statistics
-import sys
 import time
 from pathlib import Path
 
 import fcl
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from panel_deploy.build import build_model  # noqa: E402
-from panel_deploy.collision import CollisionMonitor, CollisionSettings, check_trajectory  # noqa: E402
-from panel_deploy.kinematics import forward_kinematics  # noqa: E402
-from panel_deploy.model import Body, Hinge, Model, State, box_inertia  # noqa: E402
-from panel_deploy.scene import load_scene  # noqa: E402
+from panel_deploy.build import build_model
+from panel_deploy.collision import CollisionMonitor, CollisionSettings, check_trajectory
+from panel_deploy.kinematics import forward_kinematics
+from panel_deploy.model import Body, Hinge, Model, State, box_inertia
+from panel_deploy.scene import load_scene
 
 SCENE = Path(__file__).resolve().parent.parent / "config" / "scenes" / "paper_4x4.yaml"
 

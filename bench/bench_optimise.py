@@ -23,18 +23,16 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+from panel_deploy.build import build_model
+from panel_deploy.optimise import optimise, print_progress, save_result, verify
+from panel_deploy.scene import load_scene, resolve_scene
 
-from panel_deploy.build import build_model  # noqa: E402
-from panel_deploy.optimise import optimise, print_progress, save_result, verify  # noqa: E402
-from panel_deploy.scene import load_scene, resolve_scene  # noqa: E402
+ROOT = Path(__file__).resolve().parent.parent
 
 #: The re-check of :func:`panel_deploy.optimise.verify`, as ``panel-deploy optimise`` runs it.
 TIGHTEN, REFINE = 10.0, 2

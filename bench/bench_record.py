@@ -27,10 +27,8 @@ import time
 from contextlib import redirect_stdout
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from panel_deploy.cli import main  # noqa: E402
-from panel_deploy.record import open_recording  # noqa: E402
+from panel_deploy.cli import main
+from panel_deploy.record import open_recording
 
 
 def _job(argv) -> float:

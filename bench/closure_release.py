@@ -20,15 +20,12 @@ import argparse
 import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from panel_deploy.build import build_model  # noqa: E402
-from panel_deploy.dynamics import simulate  # noqa: E402
-from panel_deploy.dynamics.report import hinge_angles, hinge_release_report  # noqa: E402
-from panel_deploy.errors import PanelDeployError  # noqa: E402
-from panel_deploy.scene import load_scene, resolve_scene  # noqa: E402
+from panel_deploy.build import build_model
+from panel_deploy.dynamics import simulate
+from panel_deploy.dynamics.report import hinge_angles, hinge_release_report
+from panel_deploy.errors import PanelDeployError
+from panel_deploy.scene import load_scene, resolve_scene
 
 
 def closures(scene, k_m_values):

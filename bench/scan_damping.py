@@ -21,14 +21,13 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+from panel_deploy.build import build_model
+from panel_deploy.errors import PanelDeployError
+from panel_deploy.optimise import evaluate, load_stiffness, tolerance_check
+from panel_deploy.optimise.search import search_scene
+from panel_deploy.scene import load_scene, resolve_scene
 
-from panel_deploy.build import build_model  # noqa: E402
-from panel_deploy.errors import PanelDeployError  # noqa: E402
-from panel_deploy.optimise import evaluate, load_stiffness, tolerance_check  # noqa: E402
-from panel_deploy.optimise.search import search_scene  # noqa: E402
-from panel_deploy.scene import load_scene, resolve_scene  # noqa: E402
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def describe(ev) -> str:

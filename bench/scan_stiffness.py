@@ -20,25 +20,21 @@ import argparse
 import sys
 import time
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
+import scan_args
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from panel_deploy.bench import sampling  # noqa: E402
-from panel_deploy.errors import PanelDeployError  # noqa: E402
-from panel_deploy.optimise.parallel import Evaluator, Job, make_backend  # noqa: E402
-from panel_deploy.optimise.search import search_scene  # noqa: E402
+from panel_deploy.errors import PanelDeployError
+from panel_deploy.optimise.parallel import Evaluator, Job, make_backend
+from panel_deploy.optimise.search import search_scene
 
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sampling.add_arguments(p, n=80, spread=0.15)
+    scan_args.add_arguments(p, n=80, spread=0.15)
     args = p.parse_args(argv)
     try:
-        scene, model, problem, ks, (lo, hi), what = sampling.sample(args)
+        scene, model, problem, ks, (lo, hi), what = scan_args.sample(args)
     except PanelDeployError as e:
         sys.exit(f"scan_stiffness: {e}")
     print(f"scene {scene.name}{' with ' + ', '.join(args.set) if args.set else ''}: {what}")

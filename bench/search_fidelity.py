@@ -28,16 +28,12 @@ import argparse
 import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
+import scan_args
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from panel_deploy.bench import sampling  # noqa: E402
-from panel_deploy.errors import PanelDeployError  # noqa: E402
-from panel_deploy.optimise.parallel import Evaluator, Job, make_backend  # noqa: E402
+from panel_deploy.errors import PanelDeployError
+from panel_deploy.optimise.parallel import Evaluator, Job, make_backend
 
 
 def with_rtol(scene, rtol, refine):
@@ -74,12 +70,12 @@ def compare(ref, out):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sampling.add_arguments(p, n=40, spread=0.1)
+    scan_args.add_arguments(p, n=40, spread=0.1)
     p.add_argument("--rtol", type=float, action="append", metavar="RTOL",
                    help="candidate search rtol (repeatable; default 1e-3, 3e-3, 1e-2)")
     args = p.parse_args(argv)
     try:
-        scene, model, _, ks, _, what = sampling.sample(args)
+        scene, model, _, ks, _, what = scan_args.sample(args)
     except PanelDeployError as e:
         sys.exit(f"search_fidelity: {e}")
 

@@ -76,7 +76,7 @@ def _segment_line(pair, facet, rows, cols, a, b, t):
     return np.array([[p[0] - a / 2, y, z], [p[0] + a / 2, y, z]])
 
 
-def _hinge(name, ia, ib, cells_a, cells_b, segments, stowed, geom, k, c):
+def _hinge(name, ia, ib, cells_a, segments, stowed, geom, k, c):
     """A body-level hinge from its collinear cell segments (see :class:`Hinge`)."""
     rows, cols, a, b, t = geom
     states = [stowed.hinges[s] for s in segments]
@@ -153,7 +153,7 @@ def build_model(scene: Scene, design=None) -> Model:
         segs = sorted(segs)
         name = hinge_name(segs[0])
         k = overrides.get(name, scene.hinges.stiffness)
-        hinges.append(_hinge(name, ia, ib, bodies[ia].cells, bodies[ib].cells, segs, d.stowed,
+        hinges.append(_hinge(name, ia, ib, bodies[ia].cells, segs, d.stowed,
                              geom, k, scene.hinges.damping_ratio * k))
 
     cuts = None

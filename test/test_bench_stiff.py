@@ -108,3 +108,18 @@ def test_time_at_equal_error_interpolates_each_method_in_log_log():
     assert time_at_error(points, 1e-1) == (0.5, "A")
     t, method = time_at_error(points, 1e-6)
     assert math.isnan(t) and method == ""
+
+
+def test_write_suite_writes_its_table_and_csv(tmp_path, monkeypatch):
+    # two cases, one method: the writing, not the suite, is under test
+    cases = [c for c in stiff.stiff_cases(full=False)][:2]
+    monkeypatch.setattr(stiff, "stiff_cases", lambda full: cases)
+    real = stiff.run_suite
+    monkeypatch.setattr(stiff, "run_suite", lambda *a, **k: real(*a, methods=("compiled",), **k))
+    out = tmp_path / "new" / "folder"
+    text = stiff.write_suite(load_scene(SCENE), out, quick=True, t_end=0.002, sizes=(), max_steps=500)
+    assert sorted(p.name for p in out.iterdir()) == ["stiff_cases_quick.csv", "stiff_cases_quick.md"]
+    assert (out / "stiff_cases_quick.md").read_text() == text + "\n"
+    rows = (out / "stiff_cases_quick.csv").read_text().splitlines()
+    assert rows[0].startswith("case,method,status") and len(rows) == 1 + 2
+    assert all(",compiled,ok," in row for row in rows[1:])

@@ -4,7 +4,7 @@ Each case is the base model with one thing pushed to an extreme (contact
 stiffness k_s, penalty stiffness k_M = k_N (also overdamped), no damping, a 200:1 spread of hinge
 stiffness, no or 10 g gravity, a 1000:1 mass ratio, bigger arrays). Every
 integrator runs every case from the exactly folded stowed state (a singular
-configuration of the closed loop, NOTES.md section 6); the outcome is
+configuration of the closed loop, docs/findings.md); the outcome is
 success, or ``success=False`` with a message. A run that "succeeds" with a
 non-finite state is reported as silent failure, the one outcome that must
 never happen.
@@ -19,15 +19,13 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
 from ..model import Model
 from ..scene import INTEGRATORS, SimulationSection
-
-EXPLICIT = ("RK23", "RK45", "DOP853", "compiled")
-STIFF = ("Radau", "BDF")
 
 
 @dataclass(frozen=True)
@@ -260,37 +258,32 @@ def array_models(scene, sizes) -> tuple[dict, list]:
     return models, notes
 
 
-def stiff_command(args) -> int:
-    """Run the suite on ``args.scene`` and write ``args.out_dir``/stiff_cases.{csv,md}.
+def write_suite(scene, out_dir, *, quick: bool = False, t_end: float = 0.3,
+                sizes=((6, 6), (8, 8)), max_steps: int = 100_000) -> str:
+    """Run the suite on ``scene`` (and its array resized to ``sizes``) and write
+    ``out_dir``/stiff_cases{,_quick}.{csv,md}; returns the table with its header.
 
-    ``args``: scene, quick (bool), t_end (s), sizes (list of (rows, cols)),
-    max_steps (step budget of every run), out_dir.
+    ``quick`` runs the extreme values only; ``t_end`` (s) is every run's end,
+    sampled every ms; ``max_steps`` the step budget of every run.
     """
-    from pathlib import Path
-
     from ..build import build_model
-    from ..scene import load_scene
-
-    scene = load_scene(args.scene)
-    base = dataclasses.replace(scene.simulation, t_end=args.t_end,
-                               samples=int(round(args.t_end / 1e-3)) + 1)
-    models = {scene.name or "base": build_model(scene)}
-    bigger, notes = array_models(scene, args.sizes)
-    models.update(bigger)
-    outcomes = run_suite(models, base, stiff_cases(full=not args.quick),
-                         max_steps=args.max_steps, verbose=True)
-    text = table(outcomes)
-    header = [f"# Stiff-case suite: {scene.name}, t_end = {args.t_end:g} s, "
-              f"rtol {base.rtol:g}, atol {base.atol:g}, step budget {args.max_steps}, "
-              "error against a DOP853 (else Radau) reference at rtol 1e-10", ""]
-    header += [f"- {c.name}: {c.description}" for c in stiff_cases(full=not args.quick)]
-    header += [f"- {n}" for n in notes] + [""]
-    out = Path(args.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    stem = "stiff_cases_quick" if args.quick else "stiff_cases"
     from ..validate import write_atomic
-    write_atomic(out / f"{stem}.md", lambda f: f.write("\n".join(header) + "\n" + text + "\n"),
-                 "--out-dir")
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)  # before the work, not after it
+    base = dataclasses.replace(scene.simulation, t_end=t_end, samples=int(round(t_end / 1e-3)) + 1)
+    models = {scene.name or "base": build_model(scene)}
+    bigger, notes = array_models(scene, sizes)
+    models.update(bigger)
+    cases = stiff_cases(full=not quick)
+    outcomes = run_suite(models, base, cases, max_steps=max_steps, verbose=True)
+    header = [f"# Stiff-case suite: {scene.name}, t_end = {t_end:g} s, "
+              f"rtol {base.rtol:g}, atol {base.atol:g}, step budget {max_steps}, "
+              "error against a DOP853 (else Radau) reference at rtol 1e-10", ""]
+    header += [f"- {c.name}: {c.description}" for c in cases]
+    header += [f"- {n}" for n in notes] + [""]
+    text = "\n".join(header) + "\n" + table(outcomes)
+    stem = "stiff_cases_quick" if quick else "stiff_cases"
+    write_atomic(out / f"{stem}.md", lambda f: f.write(text + "\n"), "--out-dir")
     write_csv(outcomes, out / f"{stem}.csv")
-    print("\n".join(header) + "\n" + text)
-    return 0
+    return text

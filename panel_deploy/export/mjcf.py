@@ -75,16 +75,6 @@ def _name(text: str) -> str:
     return quoteattr(str(text))
 
 
-def joint_name(model: Model, coordinate: int) -> str:
-    """MJCF joint name of generalised coordinate ``coordinate`` (the hinge name)."""
-    return model.hinges[model.joints[coordinate]].name
-
-
-def body_name(model: Model, body: int) -> str:
-    """MJCF body name of body ``body``."""
-    return model.bodies[body].name
-
-
 def _children(model: Model):
     children = [[] for _ in model.bodies]
     for b in model.order[1:]:

@@ -74,12 +74,6 @@ class Recording:
         """Messages read on ``topic``."""
         return len(self._raw.get(topic, ()))
 
-    @property
-    def end_time(self) -> float | None:
-        """The latest log time read, s (None without messages)."""
-        times = [raw[-1][0] for raw in self._raw.values() if raw]
-        return max(times) * 1e-9 if times else None
-
     def messages(self, topic: str, typename: str | None = None) -> list:
         """``[(log_time ns, message)]`` of ``topic``, decoded with the rosbags Jazzy type store.
 

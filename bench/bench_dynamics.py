@@ -2,8 +2,8 @@
 
     python bench/bench_dynamics.py [--window S] [--repeats R] [method ...]
 
-Methods: "compiled:dopri5", "compiled:ros34pw2", "compiled" (auto choice) and
-the scipy names; default: both compiled schemes over a tolerance sweep, the
+Methods: any simulation.method name ("dopri5", "ros34pw2", "compiled" (the
+choice of the two), and the scipy names); default: both compiled schemes over a tolerance sweep, the
 scipy methods at rtol 1e-6. For each closure model (penalty, exact) it prints
 the RHS and stiff-Jacobian cost (median of 5 runs of 2000 calls inside numba),
 then per method and rtol (atol = 1e-2 rtol): the median over R runs of the
@@ -25,13 +25,13 @@ import numpy as np
 from numba import njit
 
 from panel_deploy.build import build_model
-from panel_deploy.scene import load_scene
 from panel_deploy.dynamics import kernels
 from panel_deploy.dynamics.pack import pack
 from panel_deploy.dynamics.simulate import simulate
+from panel_deploy.scene import load_scene
 
 SCIPY = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA")
-COMPILED = ("compiled:dopri5", "compiled:ros34pw2")
+COMPILED = ("dopri5", "ros34pw2", "compiled")
 SWEEP = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
 #: Tried in turn: the exact closure's DOPRI5 step collapses at rtol 1e-11 (t ~ 0.1 s).
 REFERENCE_RTOL = (1e-11, 1e-10, 1e-9)
@@ -60,11 +60,9 @@ def kernel_cost(P, y, calls=2000, repeats=5):
 
 
 def _run(model, settings, method, repeats):
-    name, _, scheme = method.partition(":")
-    s = dataclasses.replace(settings, method=name)
-    kw = {"compiled_scheme": scheme or "auto", "max_steps": 2_000_000}
-    simulate(model, dataclasses.replace(s, t_end=1e-3, samples=2), **kw)  # compile / warm up
-    runs = [simulate(model, s, **kw) for _ in range(repeats)]
+    s = dataclasses.replace(settings, method=method)
+    simulate(model, dataclasses.replace(s, t_end=1e-3, samples=2))  # compile / warm up
+    runs = [simulate(model, s) for _ in range(repeats)]
     return float(np.median([r.wall_time for r in runs])), runs[0]
 
 
@@ -74,7 +72,7 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("methods", nargs="*")
     args = ap.parse_args(argv)
-    methods = args.methods or (COMPILED + SCIPY)
+    methods = args.methods or (COMPILED[:2] + SCIPY)
     scene = load_scene(Path(__file__).resolve().parent.parent / "config" / "scenes" / "paper_4x4.yaml")
     base = build_model(scene)
     samples = int(round(args.window / 0.005)) + 1
@@ -82,8 +80,8 @@ def main(argv=None):
     for closure in ("penalty", "exact"):
         model = dataclasses.replace(base, closure=dataclasses.replace(base.closure, method=closure))
         for ref_rtol in REFERENCE_RTOL:
-            ref = simulate(model, dataclasses.replace(settings, method="compiled", rtol=ref_rtol,
-                                                      atol=1e-2 * ref_rtol), compiled_scheme="dopri5")
+            ref = simulate(model, dataclasses.replace(settings, method="dopri5", rtol=ref_rtol,
+                                                      atol=1e-2 * ref_rtol))
             if ref.success:
                 break
         mid = len(ref.t) // 2
@@ -94,12 +92,12 @@ def main(argv=None):
               f"stiff Jacobian {jac_s * 1e6:.1f} us (inside numba)", flush=True)
         baseline = None
         for method in methods:
-            tols = SWEEP if method.startswith("compiled") else (1e-6,)
+            tols = SWEEP if method in COMPILED else (1e-6,)
             for rtol in tols:
                 s = dataclasses.replace(settings, rtol=rtol, atol=1e-2 * rtol)
                 wall, r = _run(model, s, method, args.repeats)
                 per_s = wall / r.t[-1]
-                if method == "compiled:dopri5" and rtol == 1e-6:
+                if method == "dopri5" and rtol == 1e-6:
                     baseline = per_s
                 m = min(len(r.t), len(ref.t))
                 err = float(np.abs(r.theta[:m] - ref.theta[:m]).max())

@@ -21,7 +21,9 @@ import yaml
 
 from .errors import SceneError
 
-INTEGRATORS = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA", "compiled")
+#: ``simulation.method`` names: the integrators of
+#: :data:`panel_deploy.dynamics.integrate.METHODS` (a test keeps the two equal).
+INTEGRATORS = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA", "dopri5", "ros34pw2", "compiled")
 
 # --- limits: sanity bounds stated in the schema, so absurd input fails at once ---
 #: Panels along one side: the circuit search, packing check and model are
@@ -262,7 +264,9 @@ class SimulationSection:
     t_end: float = spec(1.0, number(0, 600.0, low_open=True, why="arrays deploy in seconds; "
                                                                   "ten minutes is far beyond"), "s",
                         "end time")
-    method: str = spec("RK23", choice(*INTEGRATORS), "", "integrator (compiled: in-loop compiled RK)")
+    method: str = spec("RK23", choice(*INTEGRATORS), "",
+                       "integrator: scipy's RK23 ... LSODA, the compiled dopri5 or ros34pw2, or "
+                       "compiled (the one of those two that suits the start state)")
     rtol: float = spec(1.0e-6, number(0, low_open=True), "", "relative tolerance")
     atol: float = spec(1.0e-8, number(0, low_open=True), "", "absolute tolerance")
     max_step: float = spec(math.inf, number(0, low_open=True, allow_inf=True), "s", "largest step")

@@ -3,13 +3,15 @@
 Format: one ``.npz`` file (numpy's zip of arrays), written to a temporary file
 and renamed into place so that an interrupted run never leaves a half file.
 
-Arrays: every array attribute of :class:`~panel_deploy.dynamics.result.SimulationResult`
+Arrays: every per-sample array of :class:`~panel_deploy.dynamics.result.SimulationResult`
 under its own name (``t``, ``theta``, ``omega``, ``rotation``, ``position``,
 ``linear_velocity``, ``angular_velocity``, ``constraint_gap``,
-``closure_sigma_min``), energies as ``energy_<kind>``, and
+``closure_sigma_min``, ``cut_theta``), energies as ``energy_<kind>``, and
 ``scene_yaml`` (the scene mapping as YAML text), ``stiffness`` (k per hinge,
-N m/rad, as simulated), ``hinge_names``, ``body_names``, ``success``,
-``status``, ``message``, ``method``, ``format_version``.
+N m/rad, as simulated), ``hinge_names``, ``body_names``, and the run's
+``success``, ``status``, ``message``, ``method``, ``scheme``, ``nfev``,
+``njev``, ``nlu``, ``nsteps``, ``nswitches``, ``gap_limit``, ``wall_time``;
+``format_version``.
 """
 
 from __future__ import annotations
@@ -21,13 +23,16 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .dynamics.result import SimulationResult, Status
+from .dynamics.result import PER_SAMPLE, SimulationResult, Status
 from .errors import SceneError, TrajectoryError
 from .validate import load_yaml, yaml_problem
 
-FORMAT_VERSION = 1
-_ARRAYS = ("t", "theta", "omega", "rotation", "position", "linear_velocity",
-           "angular_velocity", "constraint_gap", "closure_sigma_min")
+FORMAT_VERSION = 2
+_ARRAYS = PER_SAMPLE
+#: The run's scalars: name -> kind (i integer, f number, U text, b bool).
+_SCALARS = {"success": "b", "status": "i", "message": "U", "method": "U", "scheme": "U",
+            "nfev": "i", "njev": "i", "nlu": "i", "nsteps": "i", "nswitches": "i",
+            "gap_limit": "f", "wall_time": "f"}
 
 
 def save_trajectory(path, result: SimulationResult, scene, model, flag: str = "--out") -> Path:
@@ -43,9 +48,9 @@ def save_trajectory(path, result: SimulationResult, scene, model, flag: str = "-
     payload.update(
         scene_yaml=np.array(yaml.safe_dump(scene.data, sort_keys=False)),
         stiffness=model.stiffness, hinge_names=np.array([h.name for h in model.hinges]),
-        body_names=np.array([b.name for b in model.bodies]), success=np.array(result.success),
-        status=np.array(result.status), message=np.array(result.message),
-        method=np.array(result.method), format_version=np.array(FORMAT_VERSION))
+        body_names=np.array([b.name for b in model.bodies]),
+        format_version=np.array(FORMAT_VERSION))
+    payload.update({name: np.array(getattr(result, name)) for name in _SCALARS})
     from .validate import write_atomic
     return write_atomic(path, lambda f: np.savez_compressed(f, **payload), flag, mode="wb")
 
@@ -83,12 +88,15 @@ def load_trajectory(path):
             NotImplementedError, RuntimeError, UnicodeDecodeError) as e:
         reason = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise TrajectoryError(f"{path}: not a readable trajectory file ({reason})") from None
-    missing = [k for k in (*_ARRAYS, "scene_yaml", "stiffness", "format_version") if k not in data]
-    if missing:
-        raise TrajectoryError(f"{path}: missing arrays {', '.join(missing)}")
+    if "format_version" not in data:
+        raise TrajectoryError(f"{path}: missing arrays format_version")
     version = _scalar(path, data, "format_version", "i")
     if version != FORMAT_VERSION:
-        raise TrajectoryError(f"{path}: format_version {version}, expected {FORMAT_VERSION}")
+        raise TrajectoryError(f"{path}: format_version {version}, expected {FORMAT_VERSION} "
+                              "(simulate it again with this version's simulate --out)")
+    missing = [k for k in (*_ARRAYS, *_SCALARS, "scene_yaml", "stiffness") if k not in data]
+    if missing:
+        raise TrajectoryError(f"{path}: missing arrays {', '.join(missing)}")
     _check_arrays(path, data)
     try:
         scene = scene_from_dict(load_yaml(_scalar(path, data, "scene_yaml", "U")))
@@ -97,31 +105,30 @@ def load_trajectory(path):
     except yaml.YAMLError as e:
         raise TrajectoryError(f"{path}: stored scene is invalid ({yaml_problem(e)})") from None
     energy = {k[len("energy_"):]: v for k, v in data.items() if k.startswith("energy_")}
-    status = _scalar(path, data, "status", "i", 0)
+    run = {name: _scalar(path, data, name, kind) for name, kind in _SCALARS.items()}
+    status = run["status"]
     if status not in Status._value2member_map_:
         raise TrajectoryError(f"{path}: status: {status} is not a simulation status "
                               f"({', '.join(f'{s.value} {s.name}' for s in Status)})")
-    success = bool(_scalar(path, data, "success", "b", True))
-    if success != (status == Status.REACHED_T_END):
-        raise TrajectoryError(f"{path}: success {success} contradicts status {status}")
-    result = SimulationResult(**{k: data[k] for k in _ARRAYS}, energy=energy,
-                              success=success,
-                              status=Status(status),
-                              message=str(_scalar(path, data, "message", "U", "")),
-                              method=str(_scalar(path, data, "method", "U", "")))
+    run.update(success=bool(run["success"]), status=Status(status))
+    if run["success"] != (status == Status.REACHED_T_END):
+        raise TrajectoryError(f"{path}: success {run['success']} contradicts status {status}")
+    result = SimulationResult(**{k: data[k] for k in _ARRAYS}, energy=energy, **run)
     return result, scene, data["stiffness"]
 
 
 def _scalar(path, data, name, kind, default=None):
-    """Stored 0-d array ``name`` as a Python value of kind i (integer), b (bool)
-    or U (text); TrajectoryError naming it if it has another type or shape."""
+    """Stored 0-d array ``name`` as a Python value of kind i (integer), f (a
+    finite number), b (bool) or U (text); TrajectoryError naming it if it has
+    another type or shape."""
     if name not in data:
         return default
     a = data[name]
-    ok = a.shape == () and (a.dtype.kind in ("iu" if kind == "i" else kind)
-                            or (kind == "b" and a.dtype.kind in "iu"))
+    accepted = {"i": "iu", "f": "fiu", "b": "biu", "U": "U"}[kind]
+    ok = a.shape == () and a.dtype.kind in accepted and (kind != "f" or np.isfinite(a))
     if not ok:
-        want = {"i": "an integer", "b": "true or false", "U": "text"}[kind]
+        want = {"i": "an integer", "f": "a finite number", "b": "true or false",
+                "U": "text"}[kind]
         raise TrajectoryError(f"{path}: {name}: expected {want}, got an array of "
                               f"{a.dtype} with shape {a.shape}")
     return a.item()
@@ -148,7 +155,8 @@ def _check_arrays(path, data):
                               "instants must increase")
     theta = float_array("theta", 2)
     for name, ndim in (("omega", 2), ("rotation", 4), ("position", 3), ("linear_velocity", 3),
-                       ("angular_velocity", 3), ("constraint_gap", 1), ("closure_sigma_min", 2)):
+                       ("angular_velocity", 3), ("constraint_gap", 1), ("closure_sigma_min", 2),
+                       ("cut_theta", 2)):
         a = float_array(name, ndim)
         if len(a) != s:
             raise TrajectoryError(f"{path}: {name} has {len(a)} samples, t has {s}")

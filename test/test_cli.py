@@ -46,6 +46,10 @@ def test_simulate_saves_and_collide_reads_back(capsys, tmp_path):
     result, scene, k = load_trajectory(out_file)
     assert result.theta.shape == (401, 11) and scene.name == "paper_4x4"
     assert np.allclose(k, 0.1) and result.t[-1] == pytest.approx(0.01)
+    # the run's own record comes back with it: scheme, counters, cut-hinge angles
+    assert (result.method, result.scheme) == ("compiled", "ros34pw2")
+    assert (result.nsteps, result.nfev, result.nswitches) == (s["nsteps"], s["nfev"], s["switches"])
+    assert result.cut_theta.shape == (401, 1) and result.gap_limit == pytest.approx(0.01)
     code, out, _ = run(capsys, "collide", str(out_file), "--json")
     assert code == 0 and json.loads(out)["collided"] is False
 

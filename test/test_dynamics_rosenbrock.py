@@ -40,7 +40,7 @@ def test_stiff_overdamped_hinge_matches_closed_form():
     r = simulate(model, SimulationSection(t_end=T, method="compiled", rtol=1e-6, atol=1e-9,
                                           samples=41), state)
     assert r.success, r.message
-    assert r.extra["scheme"] == "ros34pw2"
+    assert r.scheme == "ros34pw2"
     exact = np.exp(np.outer(r.t, lam)) @ a
     assert np.abs(r.theta[:, 0] - exact).max() < 1e-5
     explicit_steps = T * np.abs(lam).max() / 3.3
@@ -99,17 +99,17 @@ def test_auto_keeps_dopri5_for_a_mild_model():
     assert 3.3 / stiffness(P, y0) > 2e-4
     r = simulate(model, SimulationSection(t_end=0.05, method="compiled", samples=6),
                  State(0.0, y0[:1], y0[1:2]))
-    assert r.success and r.extra["scheme"] == "dopri5"
+    assert r.success and r.scheme == "dopri5"
 
 
 @pytest.mark.parametrize("closure", ["penalty", "exact"])
 def test_ros34pw2_energy_balance_with_damping(closure):
     model = random_branched(0, closure=closure)
     state = State(0.0, np.full(model.n_coords, 0.02), np.zeros(model.n_coords))
-    r = simulate(model, SimulationSection(t_end=0.05, method="compiled", rtol=1e-8, atol=1e-10,
-                                          samples=21), state, compiled_scheme="ros34pw2")
+    r = simulate(model, SimulationSection(t_end=0.05, method="ros34pw2", rtol=1e-8, atol=1e-10,
+                                          samples=21), state)
     assert r.success, r.message
-    assert r.extra["scheme"] == "ros34pw2" and r.njev > 0 and r.nlu >= r.nsteps
+    assert r.scheme == "ros34pw2" and r.njev > 0 and r.nlu >= r.nsteps
     E = r.energy
     total = E["kinetic"] + E["spring"] + E["gravity"] + E["dissipated"] - E["constraint_work"]
     assert E["dissipated"][-1] > 1e-2 * abs(total[0])
@@ -119,12 +119,12 @@ def test_ros34pw2_energy_balance_with_damping(closure):
 def test_ros34pw2_failures_are_data():
     model = random_branched(0)
     state = State(0.0, np.full(model.n_coords, 0.3), np.zeros(model.n_coords))
-    settings = SimulationSection(t_end=0.1, method="compiled", samples=11)
-    r = simulate(model, settings, state, gap_limit=1e-9, compiled_scheme="ros34pw2")
+    settings = SimulationSection(t_end=0.1, method="ros34pw2", samples=11)
+    r = simulate(model, settings, state, gap_limit=1e-9)
     assert not r.success and "gap" in r.message
     closed = State(0.0, np.full(model.n_coords, 0.02), np.zeros(model.n_coords))
-    r = simulate(model, settings, closed, max_steps=3, compiled_scheme="ros34pw2")
+    r = simulate(model, settings, closed, max_steps=3)
     assert not r.success and "budget" in r.message
     assert np.all(np.isfinite(r.theta))
-    with pytest.raises(ModelError):
-        simulate(model, settings, state, compiled_scheme="rodas")
+    with pytest.raises(ModelError, match="^simulation.method: expected one of .* got 'rodas'"):
+        simulate(model, SimulationSection(t_end=0.1, method="rodas"), state)

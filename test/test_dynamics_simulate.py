@@ -8,7 +8,7 @@ from scipy.integrate import solve_ivp
 
 from panel_deploy.build import build_model
 from panel_deploy.dynamics import Status, simulate, simulate_segments
-from panel_deploy.dynamics.result import concatenate
+from panel_deploy.dynamics.result import PER_SAMPLE, concatenate
 from panel_deploy.errors import ModelError
 from panel_deploy.kinematics import axis_rotation
 from panel_deploy.model import State
@@ -32,16 +32,15 @@ def plate_reference(model, theta0, t):
     return solve_ivp(f, (0, t[-1]), [theta0, 0.0], t_eval=t, rtol=1e-12, atol=1e-12).y
 
 
-@pytest.mark.parametrize("method, scheme", [("RK45", "auto"), ("compiled", "dopri5"),
-                                            ("compiled", "ros34pw2"), ("Radau", "auto")])
+@pytest.mark.parametrize("method", ["RK45", "dopri5", "ros34pw2", "Radau"])
 @pytest.mark.parametrize("gravity", [(0.0, 0.0, 0.0), (0.0, 0.0, 9.81)])
-def test_plate_matches_scalar_ode(method, scheme, gravity):
+def test_plate_matches_scalar_ode(method, gravity):
     # damping keeps the plate inside [0, pi] (no contact): zeta ~ 1 without gravity;
     # with gravity pulling it up the equilibrium is at ~0.1 rad
     model = plate_on_hinge(c=0.0043 if any(gravity) else 0.02, gravity=gravity)
     state = State(0.0, np.array([1.0]), np.zeros(1))
     r = simulate(model, SimulationSection(t_end=0.3, method=method, rtol=1e-9, atol=1e-11,
-                                          samples=61), state, compiled_scheme=scheme)
+                                          samples=61), state)
     assert r.success, r.message
     ref = plate_reference(model, 1.0, r.t)
     assert r.theta.min() > 0
@@ -191,9 +190,6 @@ def test_segment_size_is_checked(bad):
 
 # --- blocks are one integration: joined, they are simulate() bit for bit ---
 
-PER_SAMPLE = ("t", "theta", "omega", "rotation", "position", "linear_velocity",
-              "angular_velocity", "constraint_gap", "closure_sigma_min")
-
 
 def assert_same_run(blocks, whole):
     joined = concatenate(blocks)
@@ -202,11 +198,8 @@ def assert_same_run(blocks, whole):
     assert joined.energy.keys() == whole.energy.keys()
     for name in whole.energy:
         assert np.array_equal(joined.energy[name], whole.energy[name]), name
-    assert np.array_equal(joined.extra["cut_theta"], whole.extra["cut_theta"])
-    for name in ("nfev", "njev", "nlu", "nsteps"):
+    for name in ("nfev", "njev", "nlu", "nsteps", "nswitches", "scheme", "gap_limit"):
         assert getattr(joined, name) == getattr(whole, name), name
-    assert joined.extra["switches"] == whole.extra["switches"]
-    assert joined.extra["scheme"] == whole.extra["scheme"]
     assert (joined.success, joined.status, joined.message) == (
         whole.success, whole.status, whole.message)
     assert all(b.success for b in blocks[:-1])
@@ -219,20 +212,18 @@ def paper():
 
 
 @pytest.mark.parametrize("method, scheme, t_end, samples, block", [
-    ("compiled", "auto", 0.5, 101, 7),      # ROS34PW2 on the paper scene
-    ("compiled", "dopri5", 0.5, 101, 7),
-    ("RK45", "auto", 0.05, 21, 4),
-    ("Radau", "auto", 0.03, 13, 4),
+    ("compiled", "ros34pw2", 0.5, 101, 7),  # the paper scene is stiff at the start
+    ("dopri5", "dopri5", 0.5, 101, 7),
+    ("RK45", "RK45", 0.05, 21, 4),
+    ("Radau", "Radau", 0.03, 13, 4),
 ])
 def test_paper_segments_are_simulate_bit_for_bit(paper, method, scheme, t_end, samples, block):
     model, sim = paper
     settings = dataclasses.replace(sim, method=method, t_end=t_end, samples=samples)
-    whole = simulate(model, settings, compiled_scheme=scheme)
+    whole = simulate(model, settings)
     assert whole.success, whole.message
-    if method == "compiled":
-        assert whole.extra["scheme"] == ("ros34pw2" if scheme == "auto" else scheme)
-    blocks = list(simulate_segments(model, settings, segment_samples=block,
-                                    compiled_scheme=scheme))
+    assert (whole.method, whole.scheme) == (method, scheme)
+    blocks = list(simulate_segments(model, settings, segment_samples=block))
     last = samples - 1
     assert [len(b.t) for b in blocks] == (
         [block + 1] + [block] * ((last - 1) // block - 1) + [last - (last - 1) // block * block])
@@ -246,25 +237,30 @@ def test_ros34pw2_steps_past_a_block():
     # filled ahead cost no steps, and the run is still simulate()'s.
     model = plate_on_hinge(c=0.02)
     state = State(0.0, np.array([1.0]), np.zeros(1))
-    settings = SimulationSection(t_end=0.3, method="compiled", rtol=1e-4, atol=1e-6, samples=61)
-    whole = simulate(model, settings, state, compiled_scheme="ros34pw2")
-    blocks = list(simulate_segments(model, settings, state, segment_samples=1,
-                                    compiled_scheme="ros34pw2"))
+    settings = SimulationSection(t_end=0.3, method="ros34pw2", rtol=1e-4, atol=1e-6, samples=61)
+    whole = simulate(model, settings, state)
+    blocks = list(simulate_segments(model, settings, state, segment_samples=1))
     assert [len(b.t) for b in blocks] == [2] + [1] * 59
     assert any(b.nsteps == 0 for b in blocks)
     assert_same_run(blocks, whole)
 
 
-@pytest.mark.parametrize("method, scheme, t_end, max_steps", [
-    ("compiled", "auto", 0.5, 700), ("compiled", "dopri5", 0.5, 2000), ("RK45", "auto", 0.05, 600)])
-def test_paper_segments_fail_where_simulate_fails(paper, method, scheme, t_end, max_steps):
+@pytest.mark.parametrize("method, t_end, max_steps", [
+    ("compiled", 0.5, 700), ("dopri5", 0.5, 2000), ("RK45", 0.05, 600)])
+def test_paper_segments_fail_where_simulate_fails(paper, method, t_end, max_steps):
     model, sim = paper
     settings = dataclasses.replace(sim, method=method, t_end=t_end, samples=101)
-    whole = simulate(model, settings, max_steps=max_steps, compiled_scheme=scheme)
+    whole = simulate(model, settings, max_steps=max_steps)
     assert not whole.success and "budget" in whole.message
     assert 8 < len(whole.t) < 101  # it fails after the first block
-    blocks = list(simulate_segments(model, settings, segment_samples=7, max_steps=max_steps,
-                                    compiled_scheme=scheme))
+    blocks = list(simulate_segments(model, settings, segment_samples=7, max_steps=max_steps))
     assert not blocks[-1].success and blocks[-1].status == Status.BUDGET_EXHAUSTED
     assert sum(b.nsteps for b in blocks) == whole.nsteps == max_steps
     assert_same_run(blocks, whole)
+
+
+def test_the_scene_schema_offers_exactly_the_registered_integrators():
+    from panel_deploy.dynamics.integrate import METHODS
+    from panel_deploy.scene import INTEGRATORS
+    assert tuple(METHODS) == INTEGRATORS
+    assert all(m.name == name and m.description for name, m in METHODS.items())

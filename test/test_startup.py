@@ -86,8 +86,7 @@ from panel_deploy.dynamics import integrate, rosenbrock, simulate
 from panel_deploy.scene import SimulationSection
 from test_dynamics_helpers import plate_on_hinge
 model = plate_on_hinge()
-simulate(model, SimulationSection(t_end=0.05, method="compiled", samples=3),
-         compiled_scheme="dopri5")
+simulate(model, SimulationSection(t_end=0.05, method="dopri5", samples=3))
 print(len(integrate.COMPILED_LOOPS[integrate.DOPRI5].signatures),
       len(integrate.COMPILED_LOOPS[integrate.ROS34PW2].signatures),
       len(rosenbrock.step.signatures))

@@ -1,7 +1,9 @@
-"""Time integrators behind one interface: scipy's OdeSolver classes, or an
-adaptive loop compiled whole with numba around either an explicit
-Dormand-Prince 5(4) or the linearly implicit Rosenbrock-W ROS34PW2 (for the
-stiff penalty and contact terms; see :func:`choose_scheme`).
+"""Time integrators behind one interface, in one registry, :data:`METHODS`
+(as scipy's ``solve_ivp`` keeps its ``METHODS``): scipy's OdeSolver classes,
+and an adaptive loop compiled whole with numba around either an explicit
+Dormand-Prince 5(4) ("dopri5") or the linearly implicit Rosenbrock-W ROS34PW2
+("ros34pw2", for the stiff penalty and contact terms); "compiled" takes the
+one of those two that suits the start state (:func:`choose_scheme`).
 
 Both sample the state at given instants t_j (scipy by dense output, the compiled
 loop by stepping exactly onto them), stop explicitly on failure, and can locate
@@ -24,19 +26,33 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
+from typing import Callable, NamedTuple
 
 import numpy as np
 from numba import njit
 
+from ..errors import ModelError
 from . import kernels, rosenbrock
 from .result import Status
 
-#: scipy.integrate's OdeSolver classes by name. scipy.integrate is imported
-#: by the runs that use it: importing it costs every command ~0.4 s.
-SCIPY_METHODS = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA")
+#: scipy's implicit solvers: they get the analytic Jacobian.
 IMPLICIT = ("Radau", "BDF", "LSODA")
 #: Switches closer than this fraction of a step to either end are not relocated.
 EDGE = 1e-3
+
+
+class Counters(NamedTuple):
+    """The work of an integration, or of one block of it."""
+
+    nfev: int = 0       # right-hand-side evaluations
+    njev: int = 0       # Jacobian evaluations
+    nlu: int = 0        # LU decompositions
+    nsteps: int = 0     # accepted steps
+    nswitches: int = 0  # located contact switches
+
+    def since(self, before: Counters) -> Counters:
+        return Counters(*(int(a) - int(b) for a, b in zip(self, before)))
 
 
 @dataclass
@@ -45,18 +61,15 @@ class Integration:
 
     ``y`` (s_done, N) holds the samples reached; ``status`` a
     :class:`~panel_deploy.dynamics.result.Status` (0 = t_end reached, negative
-    = failure with ``message``); ``scheme`` the compiled scheme used.
+    = failure with ``message``); ``method`` the :data:`METHODS` entry that ran
+    ("dopri5" or "ros34pw2" for "compiled").
     """
 
     y: np.ndarray
-    status: int
+    status: Status
     message: str
-    nfev: int
-    njev: int
-    nlu: int
-    nsteps: int
-    nswitches: int
-    scheme: str = ""
+    counters: Counters
+    method: str
 
 
 # --- switch location (shared by both integrators) ---
@@ -390,10 +403,11 @@ def _leading_finite(rows, done, upto):
     return done
 
 
-def integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit, scheme, stops):
-    """The scheme's compiled loop called once per block of samples (see
+def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
+    """The compiled loop of scheme ``name`` ("dopri5", "ros34pw2", or "compiled":
+    :func:`choose_scheme` picks) called once per block of samples (see
     :func:`integrate_blocks`)."""
-    scheme = choose_scheme(P, y0) if scheme == "auto" else scheme
+    scheme = choose_scheme(P, y0) if name == "compiled" else name
     loop = COMPILED_LOOPS[SCHEMES[scheme]]
     s, N = len(t_eval), len(y0)
     Y = np.full((s, N), np.nan)
@@ -402,7 +416,7 @@ def integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit, scheme, st
     carry[0] = t_eval[0]
     carry[2:2 + N] = y0
     counts = np.zeros(7, dtype=np.int64)
-    before = counts[:5].copy()
+    before = Counters()
     j, lo, done = 1, 0, 0
     for stop in stops:
         status = code = 0
@@ -416,9 +430,9 @@ def integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit, scheme, st
         msg = "reached t_end" if status == 0 else (
             f"{_FAILURES[status]} at t = {t_eval[done - 1]:.6g} s (last sample); "
             "integration stopped")
-        nfev, njev, nlu, nsteps, nsw = (int(c) for c in counts[:5] - before)
-        before = counts[:5].copy()
-        yield Integration(Y[lo:max(lo, hi)], status, msg, nfev, njev, nlu, nsteps, nsw, scheme)
+        total = Counters(*(int(c) for c in counts[:5]))
+        yield Integration(Y[lo:max(lo, hi)], status, msg, total.since(before), scheme)
+        before = total
         lo = max(lo, hi)
         if status != 0:
             return
@@ -426,8 +440,8 @@ def integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit, scheme, st
 
 # --- scipy OdeSolver driver ---
 
-def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit, stops):
-    """Drive a scipy OdeSolver step by step, sampling by dense output; a
+def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
+    """Drive scipy's OdeSolver ``name`` step by step, sampling by dense output; a
     generator of blocks as :func:`integrate_blocks`, the solver kept alive
     across them.
 
@@ -437,7 +451,7 @@ def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit, stops):
     """
     import scipy.integrate
 
-    cls = getattr(scipy.integrate, settings.method)
+    cls = getattr(scipy.integrate, name)
     n, N = P.n, len(y0)
     counts = {"nfev": 0, "njev": 0}
 
@@ -450,7 +464,7 @@ def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit, stops):
         return kernels.rhs_jacobian(P, y, kernels.rhs(P, y))
 
     opts = dict(rtol=settings.rtol, atol=settings.atol, max_step=settings.max_step)
-    if settings.method in IMPLICIT:
+    if name in IMPLICIT:
         opts["jac"] = jac
 
     t_end = t_eval[-1]
@@ -458,7 +472,7 @@ def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit, stops):
     j = 1
     lo = done = 0
     nsteps = nlu = nsw = 0
-    before = (0, 0, 0, 0, 0)
+    before = Counters()
     status, message = Status.REACHED_T_END, "reached t_end"
     t, y, bound = t_eval[0], y0, t_end
     solver = cls(fun, t, y, bound, **opts)
@@ -475,11 +489,11 @@ def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit, stops):
                 msg = solver.step()
             except (ValueError, np.linalg.LinAlgError) as e:  # an implicit solver's LU on inf
                 status = Status.NON_FINITE
-                message = f"{settings.method} failed at t = {t_old:.6g} s: {e}"
+                message = f"{name} failed at t = {t_old:.6g} s: {e}"
                 break
             if solver.status == "failed":
                 status = Status.STEP_COLLAPSE
-                message = f"{settings.method} failed at t = {t_old:.6g} s: {msg}"
+                message = f"{name} failed at t = {t_old:.6g} s: {msg}"
                 break
             y_new = solver.y
             if not np.all(np.isfinite(y_new)):
@@ -514,9 +528,9 @@ def integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit, stops):
                 break
         done = _leading_finite(out, done, len(out))
         hi = max(lo, min(stop + 1, done) if status == 0 else done)
-        total = (counts["nfev"], counts["njev"], nlu + getattr(solver, "nlu", 0), nsteps, nsw)
+        total = Counters(counts["nfev"], counts["njev"], nlu + getattr(solver, "nlu", 0), nsteps, nsw)
         block = np.array(out[lo:hi]).reshape(hi - lo, N)
-        yield Integration(block, status, message, *(a - b for a, b in zip(total, before)))
+        yield Integration(block, status, message, total.since(before), name)
         before, lo = total, hi
         if status != 0:
             return
@@ -537,10 +551,10 @@ def _refine_switch(sol, n, y_old, y_new, t_old, t_new, frac):
     return best
 
 
-def integrate_blocks(P, y0, t_eval, settings, max_steps, gap_limit, scheme="auto",
-                     stops=None):
-    """Integrate the packed model from y0, sampling at t_eval (see module
-    docstring), as ONE run handed out in blocks of samples.
+def integrate_blocks(P, y0, t_eval, settings, max_steps, gap_limit, stops=None):
+    """Integrate the packed model from y0 with ``settings.method`` (a name in
+    :data:`METHODS`), sampling at t_eval (see module docstring), as ONE run
+    handed out in blocks of samples.
 
     ``stops`` are increasing sample indices, the last ``len(t_eval) - 1``
     (default: that one alone, one block). A generator: the integrator runs
@@ -553,24 +567,58 @@ def integrate_blocks(P, y0, t_eval, settings, max_steps, gap_limit, scheme="auto
     block holds the samples reached (these may run past its stop) and its
     negative :class:`~panel_deploy.dynamics.result.Status`.
 
-    ``scheme`` picks the method behind ``settings.method == "compiled"``:
-    "dopri5", "ros34pw2" or "auto" (:func:`choose_scheme`); other methods ignore it.
-    ``Integration.scheme`` names the compiled scheme used ("" for scipy).
+    Raises
+    ------
+    ModelError
+        If ``settings.method`` is not in :data:`METHODS`.
     """
+    method = METHODS.get(settings.method)
+    if method is None:
+        raise ModelError(f"simulation.method: expected one of {', '.join(METHODS)}, "
+                         f"got {settings.method!r}")
     stops = (len(t_eval) - 1,) if stops is None else stops
     if not np.all(np.isfinite(kernels.rhs(P, y0))):
         return _not_started(y0, f"non-finite derivative at t = {t_eval[0]:.6g} s, the start "
-                                "(the hinge or gravity forces overflow); integration not started")
-    if settings.method == "compiled":
-        return integrate_compiled(P, y0, t_eval, settings, max_steps, gap_limit, scheme, stops)
-    return integrate_scipy(P, y0, t_eval, settings, max_steps, gap_limit, stops)
+                                "(the hinge or gravity forces overflow); integration not started",
+                            settings.method)
+    return method.blocks(P, y0, t_eval, settings, max_steps, gap_limit, stops)
 
 
-def _not_started(y0, message):
+def _not_started(y0, message, method):
     """The one block of a run that failed at its first sample."""
-    yield Integration(y0[None, :].copy(), Status.NON_FINITE, message, 1, 0, 0, 0, 0)
+    yield Integration(y0[None, :].copy(), Status.NON_FINITE, message, Counters(nfev=1), method)
 
 
-def integrate(P, y0, t_eval, settings, max_steps, gap_limit, scheme="auto") -> Integration:
-    """:func:`integrate_blocks` in one block: the whole run's :class:`Integration`."""
-    return next(integrate_blocks(P, y0, t_eval, settings, max_steps, gap_limit, scheme))
+@dataclass(frozen=True)
+class Method:
+    """An integrator of :data:`METHODS`: its name (``simulation.method``), what
+    it is, and ``blocks(P, y0, t_eval, settings, max_steps, gap_limit, stops)``,
+    the generator of :class:`Integration` blocks :func:`integrate_blocks` returns."""
+
+    name: str
+    description: str
+    blocks: Callable
+
+
+def _scipy(name: str, description: str) -> Method:
+    return Method(name, description, partial(integrate_scipy, name))
+
+
+def _compiled(name: str, description: str) -> Method:
+    return Method(name, description, partial(integrate_compiled, name))
+
+
+#: Every integrator by its ``simulation.method`` name. scipy.integrate is
+#: imported by the runs that use it: importing it costs every command ~0.4 s.
+METHODS = {m.name: m for m in (
+    _scipy("RK23", "scipy's explicit Bogacki-Shampine 3(2)"),
+    _scipy("RK45", "scipy's explicit Dormand-Prince 5(4)"),
+    _scipy("DOP853", "scipy's explicit Dormand-Prince 8(5,3)"),
+    _scipy("Radau", "scipy's implicit Radau IIA of order 5, with the analytic Jacobian"),
+    _scipy("BDF", "scipy's implicit variable-order BDF, with the analytic Jacobian"),
+    _scipy("LSODA", "scipy's LSODA (Adams or BDF, switching), with the analytic Jacobian"),
+    _compiled("dopri5", "explicit Dormand-Prince 5(4) in a loop compiled whole with numba"),
+    _compiled("ros34pw2", "linearly implicit Rosenbrock-W ROS34PW2, compiled, for the stiff "
+                          "penalty and contact terms"),
+    _compiled("compiled", "dopri5 or ros34pw2, whichever suits the start state (choose_scheme)"),
+)}

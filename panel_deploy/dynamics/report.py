@@ -26,7 +26,7 @@ def hinge_order(model: Model) -> list:
 def hinge_angles(model: Model, result: SimulationResult):
     """Names and angles (s, n_hinges) of every hinge, in :func:`hinge_order`."""
     idx = hinge_order(model)
-    theta = np.column_stack([result.theta, result.extra["cut_theta"]])
+    theta = np.column_stack([result.theta, result.cut_theta])
     return [model.hinges[h].name for h in idx], idx, theta
 
 
@@ -137,5 +137,5 @@ def dynamics_summary(model: Model, result: SimulationResult, *, flat_tolerance=F
         "min_closure_sigma": (float(result.closure_sigma_min[:, 0].min())
                               if result.closure_sigma_min.shape[1] else None),
         "wall_time": float(result.wall_time), "nfev": int(result.nfev),
-        "nsteps": int(result.nsteps), "switches": int(result.extra["switches"]),
+        "nsteps": int(result.nsteps), "switches": int(result.nswitches),
     }

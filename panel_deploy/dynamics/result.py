@@ -7,7 +7,7 @@ before the failure (``t`` may then be shorter than requested).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from enum import IntEnum
 
 import numpy as np
@@ -58,17 +58,27 @@ class SimulationResult:
     closure_sigma_min : (s, k) ndarray
         The k smallest singular values of the loop-closure Jacobian (empty
         second axis for a tree).
+    cut_theta : (s, m) ndarray
+        Angles of the m cut hinges, rad (they are not coordinates: computed
+        from the body poses; empty second axis for a tree).
     success : bool
     status : Status
         0 (``Status.REACHED_T_END``), or the negative code of the failure:
         -1 step-size collapse, -2 non-finite state, -3 loop-closure gap
         above its limit, -4 step budget exhausted.
     message : str
-    nfev, njev, nlu, nsteps : int
-        Right-hand-side and Jacobian evaluations, LU decompositions, steps.
+    nfev, njev, nlu, nsteps, nswitches : int
+        Right-hand-side and Jacobian evaluations, LU decompositions, steps,
+        located contact switches.
     wall_time : float
         s.
     method : str
+        ``simulation.method`` as asked for.
+    scheme : str
+        The integrator that ran: ``method``, or for "compiled" the scheme it
+        chose ("dopri5" or "ros34pw2").
+    gap_limit : float
+        Loop-closure gap that would have ended the run, m (0 for a tree).
     """
 
     t: np.ndarray
@@ -81,6 +91,7 @@ class SimulationResult:
     energy: dict
     constraint_gap: np.ndarray
     closure_sigma_min: np.ndarray
+    cut_theta: np.ndarray
     success: bool
     status: Status
     message: str
@@ -88,19 +99,21 @@ class SimulationResult:
     njev: int = 0
     nlu: int = 0
     nsteps: int = 0
+    nswitches: int = 0
     wall_time: float = 0.0
     method: str = ""
-    extra: dict = field(default_factory=dict)
+    scheme: str = ""
+    gap_limit: float = 0.0
 
-    def head(self, n: int) -> "SimulationResult":
+    def head(self, n: int) -> SimulationResult:
         """The first ``n`` samples (counters, status and message unchanged)."""
-        per_sample = {name: getattr(self, name)[:n] for name in (
-            "t", "theta", "omega", "rotation", "position", "linear_velocity",
-            "angular_velocity", "constraint_gap", "closure_sigma_min")}
-        extra = {k: (v[:n] if isinstance(v, np.ndarray) and len(v) == len(self.t) else v)
-                 for k, v in self.extra.items()}
-        return replace(self, **per_sample, energy={k: v[:n] for k, v in self.energy.items()},
-                       extra=extra)
+        per_sample = {name: getattr(self, name)[:n] for name in PER_SAMPLE}
+        return replace(self, **per_sample, energy={k: v[:n] for k, v in self.energy.items()})
+
+
+#: The per-sample arrays of a :class:`SimulationResult` (first axis: samples).
+PER_SAMPLE = ("t", "theta", "omega", "rotation", "position", "linear_velocity",
+              "angular_velocity", "constraint_gap", "closure_sigma_min", "cut_theta")
 
 
 def concatenate(blocks) -> SimulationResult:
@@ -113,12 +126,8 @@ def concatenate(blocks) -> SimulationResult:
     if not blocks:
         raise ValueError("concatenate: no blocks")
     last = blocks[-1]
-    per_sample = {name: np.concatenate([getattr(b, name) for b in blocks]) for name in (
-        "t", "theta", "omega", "rotation", "position", "linear_velocity",
-        "angular_velocity", "constraint_gap", "closure_sigma_min")}
+    per_sample = {name: np.concatenate([getattr(b, name) for b in blocks]) for name in PER_SAMPLE}
     energy = {k: np.concatenate([b.energy[k] for b in blocks]) for k in last.energy}
     counters = {name: sum(getattr(b, name) for b in blocks)
-                for name in ("nfev", "njev", "nlu", "nsteps", "wall_time")}
-    extra = dict(last.extra, cut_theta=np.concatenate([b.extra["cut_theta"] for b in blocks]),
-                 switches=sum(b.extra["switches"] for b in blocks))
-    return replace(last, **per_sample, **counters, energy=energy, extra=extra)
+                for name in ("nfev", "njev", "nlu", "nsteps", "nswitches", "wall_time")}
+    return replace(last, **per_sample, **counters, energy=energy)

@@ -11,7 +11,7 @@ import numpy as np
 from ..errors import ModelError
 from ..model import Model, State
 from . import kernels
-from .integrate import SCHEMES, choose_scheme, integrate_blocks
+from .integrate import integrate_blocks
 from .pack import pack
 from .result import SimulationResult
 
@@ -26,8 +26,7 @@ def default_gap_limit(model: Model) -> float:
 
 
 def simulate(model: Model, settings, state: State | None = None, *,
-             max_steps: int = 2_000_000, gap_limit: float | None = None,
-             compiled_scheme: str = "auto") -> SimulationResult:
+             max_steps: int = 2_000_000, gap_limit: float | None = None) -> SimulationResult:
     """Simulate the deployment of ``model`` from ``state`` (default: stowed, at rest).
 
     This is :func:`simulate_segments` in one block (one code path): its
@@ -37,8 +36,11 @@ def simulate(model: Model, settings, state: State | None = None, *,
     ----------
     model : Model
     settings : SimulationSection (or any object with its attributes)
-        ``t_end`` (s, absolute end time), ``method`` (RK23, RK45, DOP853,
-        Radau, BDF, LSODA or compiled), ``rtol``, ``atol``, ``max_step`` (s),
+        ``t_end`` (s, absolute end time), ``method`` (a name in
+        :data:`~panel_deploy.dynamics.integrate.METHODS`: RK23, RK45, DOP853,
+        Radau, BDF, LSODA; dopri5, ros34pw2, or compiled, which takes ros34pw2
+        when the model is stiff at the start state and dopri5 otherwise),
+        ``rtol``, ``atol``, ``max_step`` (s),
         ``samples`` (number of evenly spaced t_j from ``state.t`` to
         ``t_end``) and ``events`` (locate contact switches).
     state : State, optional
@@ -47,13 +49,6 @@ def simulate(model: Model, settings, state: State | None = None, *,
     gap_limit : float, optional
         Loop-closure gap (m) that ends the run as a blow-up; default
         :func:`default_gap_limit`. Ignored for a tree.
-    compiled_scheme : {"auto", "dopri5", "ros34pw2"}
-        The integrator behind ``method="compiled"``: explicit Dormand-Prince
-        5(4), the Rosenbrock-W method ROS34PW2 (linearly implicit, for the
-        stiff penalty and contact terms), or "auto", which takes ROS34PW2 when
-        the model is stiff at the start state
-        (:func:`~panel_deploy.dynamics.integrate.choose_scheme`). Ignored by
-        the scipy methods.
 
     Returns
     -------
@@ -65,23 +60,21 @@ def simulate(model: Model, settings, state: State | None = None, *,
         "constraint_work", the work done on the system by the exact-closure
         constraint forces (Baumgarte stabilisation makes it non-zero; zero for
         penalty), so that ``kinetic + spring + gravity + dissipated -
-        constraint_work`` is constant. ``extra`` holds "cut_theta" (s, m),
-        the cut-hinge angles, "switches" (located contact switches) and
-        "gap_limit" and "scheme" (the compiled scheme used, "" for scipy).
+        constraint_work`` is constant.
 
     Raises
     ------
     ModelError
-        If the state does not fit the model or t_end is not after state.t.
-        Also if ``compiled_scheme`` is not one of the names above.
+        If the state does not fit the model, t_end is not after state.t, or
+        the method is not one of the names above.
     """
     return next(simulate_segments(model, settings, state, max_steps=max_steps,
-                                  gap_limit=gap_limit, compiled_scheme=compiled_scheme))
+                                  gap_limit=gap_limit))
 
 
 def simulate_segments(model: Model, settings, state: State | None = None, *,
                       segment_samples: int | None = None, max_steps: int = 2_000_000,
-                      gap_limit: float | None = None, compiled_scheme: str = "auto"):
+                      gap_limit: float | None = None):
     """:func:`simulate`, handed out in consecutive blocks of samples.
 
     The blocks are ONE integration, paused between blocks: the integrator
@@ -95,9 +88,9 @@ def simulate_segments(model: Model, settings, state: State | None = None, *,
 
     Parameters
     ----------
-    model, settings, state, max_steps, gap_limit, compiled_scheme
+    model, settings, state, max_steps, gap_limit
         As for :func:`simulate`; ``max_steps`` is the budget of the whole run,
-        and "auto" picks the compiled scheme once, at the start state.
+        and "compiled" picks its scheme once, at the start state.
     segment_samples : int, optional
         Samples per block (the first block also holds the start sample);
         default all of them in one block.
@@ -119,9 +112,6 @@ def simulate_segments(model: Model, settings, state: State | None = None, *,
         As :func:`simulate`; also if ``segment_samples`` is not a positive
         integer.
     """
-    if compiled_scheme not in ("auto", *SCHEMES):
-        raise ModelError(f"compiled_scheme: expected auto, {', '.join(SCHEMES)}; "
-                         f"got {compiled_scheme!r}")
     if segment_samples is not None and not (isinstance(segment_samples, int)
                                             and segment_samples >= 1):
         raise ModelError(f"segment_samples: expected an integer >= 1, got {segment_samples!r}")
@@ -141,12 +131,10 @@ def simulate_segments(model: Model, settings, state: State | None = None, *,
     limit = (default_gap_limit(model) if gap_limit is None else gap_limit) if model.cut_hinges else 0.0
     t_eval = np.linspace(state.t, settings.t_end, settings.samples)
     y = np.concatenate([theta, omega, [0.0, 0.0]])
-    if compiled_scheme == "auto" and settings.method == "compiled":
-        compiled_scheme = choose_scheme(P, y)
     last = len(t_eval) - 1
     block = last if segment_samples is None else segment_samples
     stops = [*range(block, last, block), last]
-    blocks = integrate_blocks(P, y, t_eval, settings, max_steps, limit, compiled_scheme, stops)
+    blocks = integrate_blocks(P, y, t_eval, settings, max_steps, limit, stops)
     first = 0
     while True:
         start = time.perf_counter()
@@ -195,8 +183,7 @@ def _result(P, t, run, method, wall, gap_limit) -> SimulationResult:
     return SimulationResult(
         t=t, theta=Y[:, :n].copy(), omega=Y[:, n:2 * n].copy(),
         rotation=R, position=p, linear_velocity=v, angular_velocity=w,
-        energy=energy, constraint_gap=gaps, closure_sigma_min=sigma,
+        energy=energy, constraint_gap=gaps, closure_sigma_min=sigma, cut_theta=cut_theta,
         success=run.status == 0, status=run.status, message=run.message,
-        nfev=run.nfev, njev=run.njev, nlu=run.nlu, nsteps=run.nsteps, wall_time=wall,
-        method=method, extra={"cut_theta": cut_theta, "switches": run.nswitches,
-                              "gap_limit": gap_limit, "scheme": run.scheme})
+        **run.counters._asdict(), wall_time=wall, method=method, scheme=run.method,
+        gap_limit=gap_limit)

@@ -174,8 +174,7 @@ def build_model(scene: Scene, design=None) -> Model:
     try:
         return Model.build(bodies, hinges, ground, cut_hinges=cuts, k_s=scene.contact.k_s,
                            c_s=scene.contact.c_s, closure=closure, gravity=scene.gravity,
-                           metadata={"scene": scene.name, "design": d,
-                                     "hinge_groups": groups})
+                           name=scene.name or "", hinge_groups=groups)
     except Exception as e:  # ModelError from a bad cut list
         if cuts is not None:
             raise SceneError("closure.cut_hinge", str(e)) from None

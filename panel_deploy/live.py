@@ -45,7 +45,7 @@ class DynamicsParameters:
     Attributes
     ----------
     stiffness : tuple of float
-        k, N m/rad: one per stiffness group (``model.metadata["hinge_groups"]``)
+        k, N m/rad: one per stiffness group (``model.hinge_groups``)
         or one per hinge (model order); empty: the scene's.
     damping_ratio : float
         c/k, s, for every hinge; negative: the scene's.
@@ -107,7 +107,7 @@ def apply_stiffness(model: Model, stiffness, damping_ratio: float | None = None)
         ``stiffness`` whose length is neither the group count nor the hinge count.
     """
     k = np.asarray(stiffness, dtype=float) if len(stiffness) else model.stiffness
-    groups = model.metadata.get("hinge_groups") or tuple((i,) for i in range(len(model.hinges)))
+    groups = model.hinge_groups or tuple((i,) for i in range(len(model.hinges)))
     if k.shape == (len(groups),) and len(groups) != len(model.hinges):
         per_hinge = np.empty(len(model.hinges))
         for g, idx in enumerate(groups):

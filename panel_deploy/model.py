@@ -1,8 +1,10 @@
 """The frozen multibody model of a panel array, and the mutable state made from it.
 
 Like MuJoCo's ``mjModel``/``mjData`` and Pinocchio's ``Model``/``Data``: a
-:class:`Model` never changes once built; a :class:`State` is created from it for
-each run; dynamics, collision and energy are functions of the two.
+:class:`Model` never changes once built (its dataclasses are frozen and their
+arrays read-only; a changed model is a new one, :meth:`Model.with_stiffness`);
+a :class:`State` is created from it for each run; dynamics, collision and
+energy are functions of the two.
 
 Frames and units (SI throughout): every body frame has its origin at the body's
 centroid and, in the flat (deployed) configuration, axes parallel to the flat
@@ -15,7 +17,7 @@ point in body ``i``'s frame is ``point - bodies[i].flat_position``.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -23,6 +25,19 @@ import numpy as np
 from .errors import ModelError
 
 ClosureMethod = Literal["penalty", "exact"]
+
+
+def _frozen(value, shape) -> np.ndarray:
+    """A read-only float copy of ``value`` with ``shape``."""
+    a = np.array(value, dtype=float).reshape(shape)
+    a.flags.writeable = False
+    return a
+
+
+def _freeze(obj, **shapes) -> None:
+    """Make the named array fields of the frozen dataclass ``obj`` read-only copies."""
+    for name, shape in shapes.items():
+        object.__setattr__(obj, name, _frozen(getattr(obj, name), shape))
 
 
 def box_inertia(mass: float, size) -> np.ndarray:
@@ -59,6 +74,9 @@ class Body:
     mass: float
     inertia: np.ndarray
     flat_position: np.ndarray
+
+    def __post_init__(self):
+        _freeze(self, size=(3,), inertia=(3, 3), flat_position=(3,))
 
 
 @dataclass(frozen=True)
@@ -107,6 +125,9 @@ class Hinge:
     segments: tuple
     springs: int = 1
 
+    def __post_init__(self):
+        _freeze(self, point=(3,), axis=(3,))
+
     @property
     def end_n(self) -> np.ndarray:
         """End N of the hinge line in the flat frame, m."""
@@ -122,7 +143,7 @@ class Hinge:
         """Damping of the whole hinge, ``springs * c``, N m s/rad."""
         return self.springs * self.c
 
-    def reversed(self) -> "Hinge":
+    def reversed(self) -> Hinge:
         """The same hinge with the roles of the two bodies swapped."""
         return replace(self, body_a=self.body_b, body_b=self.body_a, point=self.end_n,
                        axis=-self.axis)
@@ -154,7 +175,7 @@ class ClosureParameters:
 class Model:
     """Immutable multibody model: bodies, hinges, spanning tree, parameters.
 
-    Build with :func:`Model.build`; do not mutate the arrays.
+    Build with :func:`Model.build`; its arrays are read-only.
 
     Attributes
     ----------
@@ -181,6 +202,11 @@ class Model:
         m/s^2 in the flat array frame (the ground panel's frame).
     collision_pairs : tuple of (int, int)
         Body pairs that share no hinge, i < j.
+    name : str
+        The scene's name ("" for a model built in code).
+    hinge_groups : tuple of tuple of int
+        Hinge indices that share one stiffness (the scene's ``hinges.groups``
+        and mirror symmetry); empty: every hinge on its own.
     """
 
     bodies: tuple
@@ -196,7 +222,11 @@ class Model:
     closure: ClosureParameters
     gravity: np.ndarray
     collision_pairs: tuple
-    metadata: dict = field(default_factory=dict, compare=False)
+    name: str = ""
+    hinge_groups: tuple = ()
+
+    def __post_init__(self):
+        _freeze(self, gravity=(3,))
 
     @property
     def n_bodies(self) -> int:
@@ -217,7 +247,7 @@ class Model:
         """k of every hinge (one spring), N m/rad, shape (n_hinges,)."""
         return np.array([h.k for h in self.hinges])
 
-    def with_stiffness(self, k, c=None) -> "Model":
+    def with_stiffness(self, k, c=None) -> Model:
         """A copy with new hinge stiffnesses (and damping), shape (n_hinges,).
 
         Values are per spring, as :attr:`Hinge.k` and :attr:`Hinge.c`.
@@ -232,13 +262,11 @@ class Model:
             c = [h.c * (kk / h.k) if h.k > 0 else h.c for h, kk in zip(self.hinges, k)]
         c = np.asarray(c, dtype=float)
         hinges = tuple(replace(h, k=float(kk), c=float(cc)) for h, kk, cc in zip(self.hinges, k, c))
-        return Model(self.bodies, hinges, self.ground, self.joints, self.parent,
-                     self.body_joint, self.order, self.cut_hinges, self.k_s, self.c_s,
-                     self.closure, self.gravity, self.collision_pairs, self.metadata)
+        return replace(self, hinges=hinges)
 
     @classmethod
     def build(cls, bodies, hinges, ground=0, *, cut_hinges=None, k_s=0.0, c_s=0.0,
-              closure=ClosureParameters(), gravity=(0.0, 0.0, 0.0), metadata=None):
+              closure=ClosureParameters(), gravity=(0.0, 0.0, 0.0), name="", hinge_groups=()):
         """Build a model: spanning tree from the ground, cut hinges, collision pairs.
 
         Parameters
@@ -250,7 +278,7 @@ class Model:
         cut_hinges : sequence of int, optional
             Hinges to cut, one per independent loop. By default, for each loop
             the hinge farthest from the ground (breadth-first) is cut.
-        k_s, c_s, closure, gravity
+        k_s, c_s, closure, gravity, name, hinge_groups
             See the class attributes.
 
         Raises
@@ -300,7 +328,8 @@ class Model:
                       if frozenset((i, j)) not in linked)
         return cls(tuple(bodies), tuple(hinges), ground, tuple(joints), tuple(parent),
                    tuple(body_joint), tuple(order), cut_hinges, float(k_s), float(c_s),
-                   closure, np.asarray(gravity, dtype=float), pairs, dict(metadata or {}))
+                   closure, gravity, pairs, str(name),
+                   tuple(tuple(int(i) for i in g) for g in hinge_groups))
 
 
 def _bfs_tree(nb, hinges, ground, exclude):
@@ -344,11 +373,11 @@ class State:
     omega: np.ndarray
 
     @classmethod
-    def stowed(cls, model: Model) -> "State":
+    def stowed(cls, model: Model) -> State:
         """The stowed state at rest, t = 0: the simulator's initial state."""
         return cls(0.0, model.theta_stowed.copy(), np.zeros(model.n_coords))
 
     @classmethod
-    def flat(cls, model: Model) -> "State":
+    def flat(cls, model: Model) -> State:
         """The deployed (all angles 0) state at rest."""
         return cls(0.0, np.zeros(model.n_coords), np.zeros(model.n_coords))

@@ -86,7 +86,7 @@ def test_flat_state_is_the_array(model):
 
 def test_mirror_groups(model):
     names = [h.name for h in model.hinges]
-    groups = [sorted(names[i] for i in g) for g in model.metadata["hinge_groups"]]
+    groups = [sorted(names[i] for i in g) for g in model.hinge_groups]
     assert ["r1c1-r1c2", "r1c3-r1c4"] in groups  # the two top vertical hinges
     assert ["r3c2-r4c2"] in groups               # L4-L3 lies on the mirror line
     assert len(groups) == 7 and sum(map(len, groups)) == 12
@@ -132,3 +132,18 @@ def test_a_listed_merge_that_is_refused_is_a_scene_error(scene):
         build_model(scene_from_dict(dict(scene.data, fold=dict(scene.data["fold"], merge=merge))))
     m = build_model(scene_from_dict(dict(scene.data, fold=dict(scene.data["fold"], merge=merge[1:]))))
     assert len(m.bodies) == 15
+
+
+def test_the_model_is_immutable_and_typed(model):
+    import dataclasses
+    for array in (model.gravity, model.bodies[0].size, model.bodies[0].inertia,
+                  model.bodies[0].flat_position, model.hinges[0].point, model.hinges[0].axis):
+        with pytest.raises(ValueError, match="read-only"):
+            array[0] = 1.0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        model.name = "other"
+    assert model.name == "paper_4x4" and all(isinstance(g, tuple) for g in model.hinge_groups)
+    stiffer = model.with_stiffness(2 * model.stiffness)
+    assert (stiffer.name, stiffer.hinge_groups) == (model.name, model.hinge_groups)
+    assert np.allclose(stiffer.stiffness, 2 * model.stiffness)
+    assert [h.c / h.k for h in stiffer.hinges] == pytest.approx([h.c / h.k for h in model.hinges])

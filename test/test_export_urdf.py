@@ -50,7 +50,7 @@ def branched_tree():
               _hinge("r1-far", 2, 0, (1.5 * A, B / 2, -T / 2), (0, -1, 0), B, k=0.05,
                      facet="bottom"),
               _hinge("g-d1", 1, 3, (A / 2, -B / 2, T / 2), (-1, 0, 0), A, k=0.2)]
-    return Model.build(bodies, hinges, 1, metadata={"scene": "tree<&>"})
+    return Model.build(bodies, hinges, 1, name="tree<&>")
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +79,7 @@ def test_structure(which, request):
     ET.fromstring(text)  # well-formed XML
     assert text == model_urdf(model)  # deterministic
     urdf = _load(text)
-    assert urdf.robot.name == model.metadata["scene"]
+    assert urdf.robot.name == model.name
     names = [b.name for b in model.bodies]
     assert sorted(urdf.link_map) == sorted(names + ["world"])
     assert urdf.base_link == "world"

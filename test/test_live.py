@@ -85,7 +85,7 @@ def test_hinge_states_cut_hinge_rate_is_the_angle_derivative(short):
 
 def test_apply_stiffness_per_group_and_per_hinge(scene):
     model = build_model(scene)
-    groups = model.metadata["hinge_groups"]
+    groups = model.hinge_groups
     k = apply_stiffness(model, [0.01 * (g + 1) for g in range(len(groups))]).stiffness
     for g, idx in enumerate(groups):
         assert np.allclose(k[list(idx)], 0.01 * (g + 1))

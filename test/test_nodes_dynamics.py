@@ -126,7 +126,7 @@ def test_stiffness_per_group_is_accepted_and_read_back(graph):
     client, *_ = graph
     scene = load_scene(resolve_scene("paper_4x4"))
     from panel_deploy.build import build_model
-    groups = build_model(scene).metadata["hinge_groups"]
+    groups = build_model(scene).hinge_groups
     k = [0.05 + 0.01 * g for g in range(len(groups))]
     result, = set_params(client, Parameter("stiffness", Parameter.Type.DOUBLE_ARRAY, k))
     assert result.successful, result.reason

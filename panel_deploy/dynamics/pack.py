@@ -117,7 +117,7 @@ def pack(model: Model) -> Packed:
     cut_e2 = f3([np.cross(a, e) for a, e in zip(cut_axis, cut_e1)])
     cl = model.closure
     method = TREE if not cuts else (PENALTY if cl.method == "penalty" else EXACT)
-    gravity = np.asarray(model.gravity, dtype=float)
+    gravity = np.array(model.gravity, dtype=float)  # a writable copy: numba types read-only arrays apart
     return Packed(
         n=n,
         body=np.array(body_of + [model.ground], dtype=np.int64),

@@ -210,7 +210,7 @@ def _document(model: Model, timestep: float, integrator: str) -> str:
     solref = solref_parameters(model)
     imp = f'"{IMPEDANCE} {IMPEDANCE} 0.001 0.5 2"'
     lines = [
-        f"<mujoco model={_name(model.metadata.get('name', 'panel_array'))}>",
+        f"<mujoco model={_name(model.name or 'panel_array')}>",
         '  <compiler angle="radian" autolimits="true" inertiafromgeom="false"/>',
         f'  <option gravity="{_vec(model.gravity)}" timestep="{_f(timestep)}" '
         f'integrator="{integrator}"/>',

@@ -80,7 +80,7 @@ PANEL_RGBA = (0.25, 0.45, 0.8, 1.0)
 
 def robot_name(model: Model) -> str:
     """The URDF robot name: the scene name, or ``panel_array`` without one."""
-    return str(model.metadata.get("scene") or "panel_array")
+    return model.name or "panel_array"
 
 
 def link_origin(model: Model) -> np.ndarray:

@@ -70,7 +70,7 @@ class StiffnessProblem:
         groups : sequence of sequence of (int or str), optional
             Hinge indices or names sharing one stiffness; hinges in no group
             get a group of their own. Default:
-            ``model.metadata["hinge_groups"]``, else one group per hinge.
+            ``model.hinge_groups``, else one group per hinge.
         damping_bounds : (lower, upper), optional
             s. Makes one c/k shared by every hinge a variable, starting at
             the model's (median) c/k, which must lie within them.
@@ -83,7 +83,7 @@ class StiffnessProblem:
         """
         names = tuple(h.name for h in model.hinges)
         groups = _check_groups(groups if groups is not None
-                               else model.metadata.get("hinge_groups"), names)
+                               else model.hinge_groups or None, names)
         lo, hi = _check_bounds(bounds, "bounds", "N m/rad")
         ratio = damping_ratio(model)
         if damping_bounds is not None:

@@ -177,7 +177,7 @@ def optimise(model, scene, *, k0=None, groups=None, workers=None, dask_address=N
         hinge (a previous result's K, to go on from it); default the
         scene's ``optimisation.k0``.
     groups : sequence of sequence of (int or str), optional
-        Hinges sharing one stiffness; default ``model.metadata["hinge_groups"]``
+        Hinges sharing one stiffness; default ``model.hinge_groups``
         (the scene's ``hinges.groups``).
     workers : int, optional
         Local processes; 0 all cores, 1 in this process. Default

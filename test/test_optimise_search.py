@@ -217,20 +217,20 @@ def two_basins(model, settings):
 
 
 def test_centring_prefers_a_k_with_margin_in_damping_to_a_knife_edge():
+    from panel_deploy.optimise.damping import centre_damping
     from panel_deploy.optimise.parallel import Job, SerialBackend
-    from panel_deploy.optimise.search import _Search
+    from panel_deploy.optimise.search import Run
 
     model = chain_model(beta=0.043)
     problem = StiffnessProblem.from_model(model, (0.001, 0.2), 0.1, damping_bounds=(0.01, 0.5))
-    search = _Search(problem, SerialBackend(Job(model, scene(), two_basins)), 200, None)
-    knife, wide = search._batch([np.log10([0.1, 0.1, 0.1, 0.2]), np.log10([0.01, 0.1, 0.1, 0.2])])
+    run = Run(problem, SerialBackend(Job(model, scene(), two_basins)), 200)
+    knife, wide = run.batch([np.log10([0.1, 0.1, 0.1, 0.2]), np.log10([0.01, 0.1, 0.1, 0.2])])
     assert knife.f < wide.f < 0
-    search.centre_damping()
-    lo, hi = search.damping_window
+    centred, (lo, hi) = centre_damping(run)
     tol = 10 ** 0.005
     assert 0.15 <= lo < 0.15 * tol and 0.25 / tol < hi <= 0.25
-    assert search.centred.k[0] == pytest.approx(0.01)
-    assert search.centred.c[0] / search.centred.k[0] == pytest.approx(math.sqrt(lo * hi))
+    assert centred.k[0] == pytest.approx(0.01)
+    assert centred.c[0] / centred.k[0] == pytest.approx(math.sqrt(lo * hi))
 
 
 def test_restart_leaves_a_colliding_plateau():

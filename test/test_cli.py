@@ -1,6 +1,7 @@
 """The panel-deploy command line: every main job end to end, and its error contract."""
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -411,3 +412,11 @@ def test_optimise_result_is_rescued_when_the_folder_vanishes(capsys, tmp_path, m
     assert line.startswith("panel-deploy: error: --out: cannot write") and "saved in" in line
     rescued = Path(line.rsplit("saved in ", 1)[1])
     assert rescued.parent == tmp_path and "hinges:" in rescued.read_text()
+
+
+def test_collide_never_prints_a_non_finite_report(capsys, trajectory, monkeypatch):
+    from panel_deploy.collision.check import CollisionReport
+    real = CollisionReport.to_dict
+    monkeypatch.setattr(CollisionReport, "to_dict", lambda self, **k: {**real(self, **k), "v": math.nan})
+    code, out, err = run(capsys, "collide", str(trajectory), "--json")
+    assert code == 1 and out == "" and err.strip() == "panel-deploy: collide: non-finite result: v = nan"

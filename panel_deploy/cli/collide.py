@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import json
+import sys
 
 from ..build import build_model
 from ..collision import CollisionSettings, check_trajectory
 from ..errors import SceneError
 from ..record.reader import is_mcap
 from ..trajectory_io import load_trajectory
-from ..validate import check_stored_trajectory
+from ..validate import check_stored_trajectory, first_non_finite_value
 
 
 def collide_command(args) -> int:
@@ -19,7 +20,9 @@ def collide_command(args) -> int:
 
     The model is rebuilt from the scene stored in the file; only its geometry
     and tree matter here, not the stored stiffnesses. A stored run that failed
-    is checked up to where it stopped, and the output says so. Exit 0.
+    is checked up to where it stopped, and the output says so. Exit 0; 1 if a
+    number of the report came out non-finite (the inputs are checked finite
+    first, so this is a safety net).
     """
     mcap = is_mcap(args.trajectory)
     if mcap:
@@ -34,12 +37,16 @@ def collide_command(args) -> int:
     check_stored_trajectory(args.trajectory, result, model, stiffness)
     report = check_trajectory(model, result, CollisionSettings.from_scene(scene))
     failed = getattr(result, "success", True) is False
+    out = report.to_dict()
+    bad = first_non_finite_value(out)
+    if bad is not None:  # a NaN is never an answer
+        print(f"panel-deploy: collide: non-finite result: {bad}", file=sys.stderr)
+        return 1
     if args.json:
-        out = report.to_dict()
         if failed:  # the run stopped early: the check covers only what it computed
             out["run"] = {"success": False, "status": int(result.status), "message": result.message,
                           "t_end": float(result.t[-1])}
-        print(json.dumps(out))
+        print(json.dumps(out, allow_nan=False))
     else:
         if failed:
             print(f"the stored run FAILED at t = {result.t[-1]:.4g} s ({result.message}): "

@@ -255,8 +255,13 @@ class ClosureSection:
     k_N: float = spec(1.0e6, number(0, 1e11, low_open=True, why=_WHY_STIFF), "N/m",
                       "penalty stiffness at N (2 directions)")
     c_N: float = spec(280.0, number(0.0, 1e8, why=_WHY_STIFF), "N s/m", "penalty damping at N")
-    baumgarte: float = spec(1.0e-3, number(0, low_open=True), "s", "exact: constraint stabilisation time constant")
-    regularisation: float = spec(1.0e-10, number(0.0), "", "exact: relative Tikhonov term of the multiplier solve")
+    baumgarte: float = spec(1.0e-3, number(0, 10.0, low_open=True, floor=1e-6,
+                                           why="the stabilisation's 1/T^2 term must stay far "
+                                               "from overflow and the run's time scale"),
+                            "s", "exact: constraint stabilisation time constant")
+    regularisation: float = spec(1.0e-10, number(0.0, 1.0, why="a relative term: 1 already "
+                                                               "doubles the solve's diagonal"),
+                                 "", "exact: relative Tikhonov term of the multiplier solve")
 
 
 @dataclass(frozen=True)

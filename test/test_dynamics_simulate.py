@@ -264,3 +264,15 @@ def test_the_scene_schema_offers_exactly_the_registered_integrators():
     from panel_deploy.scene import INTEGRATORS
     assert tuple(METHODS) == INTEGRATORS
     assert all(m.name == name and m.description for name, m in METHODS.items())
+
+
+@pytest.mark.parametrize("method", ["compiled", "RK45"])
+def test_a_division_by_an_underflowed_zero_ends_as_non_finite(method):
+    # 1 / T^2 of the exact closure's stabilisation with T = 1e-300: numba and
+    # python raise ZeroDivisionError; the run fails as data, not with a traceback
+    model = random_branched(0, closure="exact")
+    model = dataclasses.replace(model, closure=dataclasses.replace(model.closure, baumgarte=1e-300))
+    state = State(0.0, np.full(model.n_coords, 0.02), np.zeros(model.n_coords))
+    r = simulate(model, SimulationSection(t_end=0.01, method=method, samples=5), state)
+    assert not r.success and r.status == Status.NON_FINITE
+    assert np.all(np.isfinite(r.theta))

@@ -421,9 +421,12 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
     for stop in stops:
         status = code = 0
         if j <= stop:  # else ROS34PW2 filled this block already
-            j, status, code = loop(
-                P, t_eval, Y, j, int(stop), carry, counts, settings.rtol, settings.atol,
-                settings.max_step, settings.events, max_steps, gap_limit)
+            try:
+                j, status, code = loop(
+                    P, t_eval, Y, j, int(stop), carry, counts, settings.rtol, settings.atol,
+                    settings.max_step, settings.events, max_steps, gap_limit)
+            except ZeroDivisionError:  # numba's float division by an underflowed zero
+                status, code = -1, -Status.NON_FINITE
         status = Status(-code if status else 0)
         done = _leading_finite(Y, done, j)
         hi = min(stop + 1, done) if status == 0 else done
@@ -487,7 +490,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
             t_old, y_old = solver.t, solver.y.copy()
             try:
                 msg = solver.step()
-            except (ValueError, np.linalg.LinAlgError) as e:  # an implicit solver's LU on inf
+            except (ValueError, np.linalg.LinAlgError, ZeroDivisionError) as e:  # LU on inf, 1/0
                 status = Status.NON_FINITE
                 message = f"{name} failed at t = {t_old:.6g} s: {e}"
                 break
@@ -577,7 +580,11 @@ def integrate_blocks(P, y0, t_eval, settings, max_steps, gap_limit, stops=None):
         raise ModelError(f"simulation.method: expected one of {', '.join(METHODS)}, "
                          f"got {settings.method!r}")
     stops = (len(t_eval) - 1,) if stops is None else stops
-    if not np.all(np.isfinite(kernels.rhs(P, y0))):
+    try:
+        finite = bool(np.all(np.isfinite(kernels.rhs(P, y0))))
+    except ZeroDivisionError:
+        finite = False
+    if not finite:
         return _not_started(y0, f"non-finite derivative at t = {t_eval[0]:.6g} s, the start "
                                 "(the hinge or gravity forces overflow); integration not started",
                             settings.method)

@@ -273,7 +273,10 @@ class SimulationSection:
                        "integrator: scipy's RK23 ... LSODA, the compiled dopri5 or ros34pw2, or "
                        "compiled (the one of those two that suits the start state)")
     rtol: float = spec(1.0e-6, number(0, low_open=True), "", "relative tolerance")
-    atol: float = spec(1.0e-8, number(0, low_open=True), "", "absolute tolerance")
+    atol: float = spec(1.0e-8, number(0, low_open=True, floor=1e-12,
+                                      why="far below any hinge's accuracy, and near double "
+                                          "precision, where the steps stall"),
+                       "", "absolute tolerance")
     max_step: float = spec(math.inf, number(0, low_open=True, allow_inf=True), "s", "largest step")
     samples: int = spec(301, integer(3, MAX_SAMPLES, "memory: every sample stores the pose and "
                                                      "velocity of every body"), "",

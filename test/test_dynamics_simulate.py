@@ -276,3 +276,29 @@ def test_a_division_by_an_underflowed_zero_ends_as_non_finite(method):
     r = simulate(model, SimulationSection(t_end=0.01, method=method, samples=5), state)
     assert not r.success and r.status == Status.NON_FINITE
     assert np.all(np.isfinite(r.theta))
+
+
+@pytest.mark.parametrize("method", ["compiled", "RK45"])
+def test_a_run_on_pace_to_need_a_hundred_budgets_ends_early(method):
+    # max_step 1e-7 s over 1 s needs 1e7 steps, 500 budgets of 20 000: that
+    # shows at the first pace check (1000 steps), not at step 20 000
+    model = plate_on_hinge()
+    state = State(0.0, np.array([1.0]), np.zeros(1))
+    settings = SimulationSection(t_end=1.0, method=method, max_step=1e-7, samples=11)
+    r = simulate(model, settings, state, max_steps=20_000)
+    assert not r.success and r.status == Status.BUDGET_EXHAUSTED
+    assert "on pace to need over 100 times the step budget" in r.message
+    assert r.nsteps == 1000
+    # 1e-5 s: 1e5 steps, 5 budgets: it runs to the end of its budget
+    r = simulate(model, dataclasses.replace(settings, max_step=1e-5), state, max_steps=20_000)
+    assert not r.success and "on pace" not in r.message and r.nsteps == 20_000
+
+
+def test_a_tolerance_below_double_precision_ends_in_seconds_not_minutes():
+    # steps of ~1e-14 s: the pace shows at the first check
+    model = plate_on_hinge()
+    state = State(0.0, np.array([1.0]), np.zeros(1))
+    r = simulate(model, SimulationSection(t_end=1.0, method="compiled", rtol=1e-13, atol=1e-300,
+                                          samples=11), state)
+    assert not r.success and r.status == Status.BUDGET_EXHAUSTED and "on pace" in r.message
+    assert r.nsteps == 2_000_000 // 100

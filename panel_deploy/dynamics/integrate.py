@@ -72,6 +72,26 @@ class Integration:
     method: str
 
 
+# --- work limits (shared by both integrators) ---
+
+#: A run whose pace so far would need more than PACE_FACTOR step budgets to
+#: reach t_end ends as soon as that shows, instead of spending the whole budget
+#: first (minutes, for a tolerance below what double precision can meet). The
+#: pace is checked every hundredth of the budget, and never before PACE_MIN_STEPS
+#: steps: the first steps are small by design (the starting step), and a run
+#: that starts slowly and speeds up (a stiff transient) stays far inside the factor.
+PACE_FACTOR, PACE_MIN_STEPS = 100.0, 1000
+
+
+@njit(cache=True)
+def _off_pace(t0, t, t_end, nsteps, max_steps) -> bool:
+    """Whether the pace of ``nsteps`` steps from t0 to t, at a check point,
+    projects past PACE_FACTOR budgets by t_end."""
+    if nsteps % max(PACE_MIN_STEPS, max_steps // 100) != 0:
+        return False
+    return (t_end - t) * nsteps > PACE_FACTOR * max_steps * (t - t0)
+
+
 # --- switch location (shared by both integrators) ---
 
 @njit(cache=True)
@@ -232,8 +252,9 @@ def _compiled_loop(scheme):
     Returns (j, status, code): j the next sample to fill; status 0 ok
     (j > j_stop, or j == s at the end), -1 failure with code: 1 step
     collapse, 2 non-finite state, 3 gap above gap_limit, 4 max_steps, the
-    negated :class:`~panel_deploy.dynamics.result.Status` (rows of Y from j
-    on stay NaN).
+    negated :class:`~panel_deploy.dynamics.result.Status`, or 5, on pace to
+    need far more than max_steps (:func:`_off_pace`; status -4 too) (rows of Y
+    from j on stay NaN).
     """
     implicit = scheme == ROS34PW2
 
@@ -331,6 +352,9 @@ def _compiled_loop(scheme):
                 if nsteps >= max_steps:
                     status, code = -1, 4
                     break
+                if _off_pace(t_eval[0], t, t_eval[s - 1], nsteps, max_steps):
+                    status, code = -1, 5
+                    break
                 grow = min(10.0, 0.9 * en ** expo) if en > 0 else 10.0
                 # After a rejection do not grow again at once (Hairer & Wanner II.4):
                 # the error estimate just said the step was too long.
@@ -360,11 +384,11 @@ def _compiled_loop(scheme):
 COMPILED_LOOPS = {k: _compiled_loop(k) for k in (DOPRI5, ROS34PW2)}
 
 
-#: The compiled loop's failure codes 1-4 are minus these statuses.
-_FAILURES = {Status.STEP_COLLAPSE: "step size collapsed",
-             Status.NON_FINITE: "non-finite state or derivative",
-             Status.GAP_EXCEEDED: "loop-closure gap exceeded the limit",
-             Status.BUDGET_EXHAUSTED: "step budget exhausted"}
+#: The compiled loop's failure codes 1-4 are minus these statuses; 5 is a
+#: budget failure found early (:func:`_off_pace`).
+_FAILURES = {1: "step size collapsed", 2: "non-finite state or derivative",
+             3: "loop-closure gap exceeded the limit", 4: "step budget exhausted",
+             5: f"on pace to need over {PACE_FACTOR:g} times the step budget"}
 
 
 #: ``choose_scheme`` takes ROS34PW2 when DOPRI5's stability limit on the
@@ -427,12 +451,12 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
                     settings.max_step, settings.events, max_steps, gap_limit)
             except ZeroDivisionError:  # numba's float division by an underflowed zero
                 status, code = -1, -Status.NON_FINITE
-        status = Status(-code if status else 0)
+        message = _FAILURES.get(code, "")
+        status = Status(-min(code, 4) if status else 0)
         done = _leading_finite(Y, done, j)
         hi = min(stop + 1, done) if status == 0 else done
         msg = "reached t_end" if status == 0 else (
-            f"{_FAILURES[status]} at t = {t_eval[done - 1]:.6g} s (last sample); "
-            "integration stopped")
+            f"{message} at t = {t_eval[done - 1]:.6g} s (last sample); integration stopped")
         total = Counters(*(int(c) for c in counts[:5]))
         yield Integration(Y[lo:max(lo, hi)], status, msg, total.since(before), scheme)
         before = total
@@ -528,6 +552,11 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
             if nsteps >= max_steps:
                 status = Status.BUDGET_EXHAUSTED
                 message = f"step budget ({max_steps}) exhausted at t = {solver.t:.6g} s"
+                break
+            if _off_pace(t_eval[0], solver.t, t_end, nsteps, max_steps):
+                status = Status.BUDGET_EXHAUSTED
+                message = (f"on pace to need over {PACE_FACTOR:g} times the step budget "
+                           f"({max_steps}) at t = {solver.t:.6g} s")
                 break
         done = _leading_finite(out, done, len(out))
         hi = max(lo, min(stop + 1, done) if status == 0 else done)

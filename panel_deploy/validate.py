@@ -157,13 +157,20 @@ def _umask() -> int:
 
 def write_atomic(path, write, flag: str = "output", mode: str = "w") -> Path:
     """Write a file atomically: ``write(f)`` on a temporary file in the target
-    folder, renamed over ``path``. No temporary file is left behind.
+    folder, renamed over ``path``. No temporary file is left behind. A
+    ``path`` that is a device or a pipe is written in place.
 
     If writing fails (disk full, folder removed meanwhile, ...), the same
     content is written to :func:`fallback_path` and a :class:`PanelDeployError`
     names ``flag``, the reason and where the content is, so nothing computed is lost.
     """
     path = Path(path)
+    if path.exists() and not path.is_file():
+        # a device or a pipe (/dev/null, /dev/stdout, a FIFO): renaming a file
+        # over it would replace the device itself, so it is written in place
+        with open(path, mode, **({} if "b" in mode else {"encoding": "utf-8"})) as f:
+            write(f)
+        return path
     folder = path.parent if str(path.parent) else Path(".")
     tmp = None
     try:

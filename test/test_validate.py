@@ -64,6 +64,21 @@ def test_atomic_write_leaves_no_part_file_and_rescues_the_content(tmp_path, monk
     assert os.listdir(target.parent) == ["r.yaml"] and target.read_text() == "k: 1\n"
 
 
+def test_a_pipe_is_written_in_place_not_replaced(tmp_path):
+    # as /dev/null or /dev/stdout would be: a rename over it would replace the device
+    import stat
+    import threading
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_text()))
+    reader.start()
+    write_atomic(fifo, lambda f: f.write("k: 1\n"), "--out")
+    reader.join(5)
+    assert got == ["k: 1\n"] and stat.S_ISFIFO(fifo.stat().st_mode)
+    assert os.listdir(tmp_path) == ["pipe"]
+
+
 def test_fold_plot_is_written_atomically_and_rescued(tmp_path, monkeypatch):
     from panel_deploy import fold
     from panel_deploy.fold.plot import plot_design

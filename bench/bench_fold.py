@@ -1,10 +1,12 @@
 """Timing of the fold design: enumeration, packing check and the DP count.
 
-Run from the repository root: ``PYTHONPATH=. python bench/bench_fold.py``. Prints wall times (median of repeats where a
-run is cheap) for 4 x 4, 6 x 6, the largest arrays whose circuits can all be
+    python bench/bench_fold.py
+
+Prints wall times (median of repeats where a run is cheap) for 4 x 4, 6 x 6, the largest arrays whose circuits can all be
 enumerated and checked within a minute, and the DP count for 8 x 8 and larger.
 """
 
+import argparse
 import statistics
 import time
 
@@ -56,4 +58,5 @@ def main():
 
 
 if __name__ == "__main__":
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     main()

@@ -12,6 +12,7 @@ summary) and the slowest cases. Writes only into a temporary folder.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import io
 import json
@@ -76,5 +77,6 @@ def sweep(folder) -> int:
 
 
 if __name__ == "__main__":
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         raise SystemExit(sweep(tmp))

@@ -11,6 +11,7 @@ the dynamics or collision code changes what these deployments do
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -39,5 +40,6 @@ def make_bags() -> int:
 
 if __name__ == "__main__":
     import os
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     os.chdir(ROOT)
     sys.exit(make_bags())

@@ -117,12 +117,10 @@ def load_trajectory(path):
     return result, scene, data["stiffness"]
 
 
-def _scalar(path, data, name, kind, default=None):
+def _scalar(path, data, name, kind):
     """Stored 0-d array ``name`` as a Python value of kind i (integer), f (a
     finite number), b (bool) or U (text); TrajectoryError naming it if it has
     another type or shape."""
-    if name not in data:
-        return default
     a = data[name]
     accepted = {"i": "iu", "f": "fiu", "b": "biu", "U": "U"}[kind]
     ok = a.shape == () and a.dtype.kind in accepted and (kind != "f" or np.isfinite(a))

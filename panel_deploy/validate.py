@@ -165,10 +165,11 @@ def write_atomic(path, write, flag: str = "output", mode: str = "w") -> Path:
     names ``flag``, the reason and where the content is, so nothing computed is lost.
     """
     path = Path(path)
+    text = {} if "b" in mode else {"encoding": "utf-8"}
     if path.exists() and not path.is_file():
         # a device or a pipe (/dev/null, /dev/stdout, a FIFO): renaming a file
         # over it would replace the device itself, so it is written in place
-        with open(path, mode, **({} if "b" in mode else {"encoding": "utf-8"})) as f:
+        with open(path, mode, **text) as f:
             write(f)
         return path
     folder = path.parent if str(path.parent) else Path(".")
@@ -178,7 +179,7 @@ def write_atomic(path, write, flag: str = "output", mode: str = "w") -> Path:
         # mkstemp makes the file private (0600); the result gets the mode
         # open() would give it
         os.fchmod(fd, 0o666 & ~_umask())
-        with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8"})) as f:
+        with os.fdopen(fd, mode, **text) as f:
             write(f)
         os.replace(tmp, path)
         return path
@@ -188,7 +189,7 @@ def write_atomic(path, write, flag: str = "output", mode: str = "w") -> Path:
         reason = e.strerror or str(e)
         try:
             rescue = fallback_path(path)
-            with open(rescue, mode, **({} if "b" in mode else {"encoding": "utf-8"})) as f:
+            with open(rescue, mode, **text) as f:
                 write(f)
         except OSError as e2:
             raise PanelDeployError(f"{flag}: cannot write {path} ({reason}), nor a fallback "

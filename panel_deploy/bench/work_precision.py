@@ -34,7 +34,7 @@ from ..scene import INTEGRATORS, SimulationSection
 from .mujoco_peer import run_mujoco
 
 #: Every integrator but "compiled", which is one of dopri5 and ros34pw2.
-SCHEMES = tuple(m for m in INTEGRATORS if m != "compiled")
+SWEPT_METHODS = tuple(m for m in INTEGRATORS if m != "compiled")
 
 SAMPLE_INTERVAL = 1e-3
 
@@ -231,7 +231,7 @@ def time_at_error(points, target: float):
 
 
 def work_precision(model: Model, base: SimulationSection, *, window=None, collision=None,
-                   quick=False, repeats=3, methods=SCHEMES, mujoco=True,
+                   quick=False, repeats=3, methods=SWEPT_METHODS, mujoco=True,
                    max_steps=50_000, verbose=False) -> WorkPrecision:
     """Run the whole work-precision sweep on ``model``; see the module doc.
 

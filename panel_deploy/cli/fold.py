@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import json
 
+from ..build import scene_design
 from ..errors import DesignError, SceneError
 from ..fold import design, designs
 from ..fold.circuits import ENUMERATION_LIMIT, count_circuits
@@ -21,7 +22,7 @@ def fold_command(args) -> int:
     list of an array's designs; ``--plot`` draws the design (for a list, the
     first packable one). Exit 0, or 1 if the design asked for does not pack."""
     if args.scene:
-        d = _scene_design(scene_of(args))
+        d = scene_design(scene_of(args))
         return _report(d, None, args)
     if args.rows is None or args.cols is None:
         raise SceneError("--rows/--cols", "give --rows and --cols, or --scene FILE")
@@ -33,11 +34,6 @@ def fold_command(args) -> int:
     except DesignError as e:
         raise SceneError("--circuit" if args.circuit is not None else "--rows/--cols",
                          str(e)) from None
-
-
-def _scene_design(scene):
-    from ..build import scene_design
-    return scene_design(scene)
 
 
 def _report(d, index, args) -> int:

@@ -384,8 +384,8 @@ def _compiled_loop(scheme):
 COMPILED_LOOPS = {k: _compiled_loop(k) for k in (DOPRI5, ROS34PW2)}
 
 
-#: The compiled loop's failure codes 1-4 are minus these statuses; 5 is a
-#: budget failure found early (:func:`_off_pace`).
+#: What the compiled loop's failure codes say: 1-4 are minus the Status of the
+#: failure; 5, a budget failure found early (:func:`_off_pace`), is also -4.
 _FAILURES = {1: "step size collapsed", 2: "non-finite state or derivative",
              3: "loop-closure gap exceeded the limit", 4: "step budget exhausted",
              5: f"on pace to need over {PACE_FACTOR:g} times the step budget"}
@@ -555,8 +555,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
                 break
             if _off_pace(t_eval[0], solver.t, t_end, nsteps, max_steps):
                 status = Status.BUDGET_EXHAUSTED
-                message = (f"on pace to need over {PACE_FACTOR:g} times the step budget "
-                           f"({max_steps}) at t = {solver.t:.6g} s")
+                message = f"{_FAILURES[5]} ({max_steps}) at t = {solver.t:.6g} s"
                 break
         done = _leading_finite(out, done, len(out))
         hi = max(lo, min(stop + 1, done) if status == 0 else done)

@@ -24,10 +24,7 @@ from .dynamics import simulate_segments
 from .dynamics.report import hinge_states
 from .dynamics.pack import pack
 from .dynamics.result import SimulationResult, concatenate
-from .collision import CollisionSettings
-from .collision.check import TrajectoryCheck
-from .dynamics.report import hinge_order
-from .errors import SceneError, TrajectoryError
+from .errors import SceneError
 from .model import Model
 from .scene import INTEGRATORS, Scene, scene_from_dict
 
@@ -300,86 +297,6 @@ def load_array(scene: str, stiffness_file: str = "") -> tuple:
     return scene_from_yaml(text, source=parsed.source), model, text
 
 
-class StreamCheck:
-    """Collision check of a joint-state stream (simulator or encoders), one
-    deployment at a time.
-
-    A stamp at or before the current deployment's first one starts a new
-    deployment (a replay, or the next run); any other stamp that does not
-    move forward is refused.
-
-    Parameters
-    ----------
-    model : Model
-    settings : CollisionSettings
-
-    Attributes
-    ----------
-    names : list of str
-        Every hinge a stream may carry (tree hinges, then cut hinges).
-    required : list of str
-        The tree hinges, in coordinate order: a stream must carry these.
-    check : TrajectoryCheck or None
-        The current deployment's check (None before its first sample).
-    deployments : int
-        Deployments seen.
-    """
-
-    def __init__(self, model: Model, collision: CollisionSettings):
-        self.model = model
-        self.collision = collision
-        self.names = [model.hinges[h].name for h in hinge_order(model)]
-        self.required = self.names[:model.n_coords]
-        self.check = None
-        self.deployments = 0
-        self._first = self._last = None
-
-    def reset(self) -> None:
-        """Forget the current deployment: the next sample starts a new one."""
-        self.check = None
-
-    def update(self, t: float, theta, omega=None) -> list:
-        """Check the sample at ``t`` (s); ``theta``, ``omega`` (rad, rad/s) of
-        :attr:`required`. Returns the collision events it revealed.
-
-        Raises
-        ------
-        TrajectoryError
-            A stamp that is neither after the last nor a new deployment's;
-            the check is unchanged.
-        """
-        if self.check is not None and t <= self._first:
-            self.check = None
-        elif self.check is not None and not t > self._last:
-            raise TrajectoryError(f"header.stamp: {t:.9g} s is not after the last sample "
-                                  f"({self._last:.9g} s)")
-        if self.check is None:
-            self.check = TrajectoryCheck(self.model, self.collision)
-            self.deployments += 1
-            self._first = t
-        events = self.check.update(t, theta, omega)
-        self._last = t
-        return events
-
-    def verdict(self) -> tuple:
-        """``(level, message, values)``: level 0 no collision so far, 2 collided."""
-        c = self.check
-        if c is None:
-            return 0, "waiting for joint states", {"deployment": self.deployments}
-        values = {"deployment": self.deployments, "t": self._last, "samples": c.checked,
-                  "d": None if c.d == float("inf") else c.d, "d_pair": list(c.d_pair or ()),
-                  "d_time": None if c.d_pair is None else c.d_time,
-                  "distance_now": c.monitor.min_distance}
-        if not c.collided:
-            return 0, "no collision", values
-        e = c.first_events[0]
-        speed = c.report().v
-        values.update(first_collision_pair=list(e.names), first_collision_t=e.t,
-                      approach_speed=speed)
-        return 2, f"collision between {e.names[0]} and {e.names[1]} at t = {e.t:.4f} s", values
-
-
-
 def optimisation_scene(scene: Scene, **overrides) -> Scene:
     """``scene`` with ``optimisation`` keys overridden (None or empty keeps the
     scene's value), validated as a scene file's would be.
@@ -399,3 +316,27 @@ def optimisation_scene(scene: Scene, **overrides) -> Scene:
 
 def _yaml_value(v) -> str:
     return yaml.safe_dump(list(v) if isinstance(v, tuple) else v, default_flow_style=True).strip()
+
+
+class Throttle:
+    """At most one report per ``period`` s (wall clock) of each kind: the first
+    at once, the others counted and told with the next one, so a stream of
+    bad messages gives a line a second instead of a line a message.
+
+    ``throttle(kind)`` returns None to stay quiet, else how many reports of
+    that kind were held back since the last one.
+    """
+
+    def __init__(self, period: float = 1.0, clock=time.monotonic):
+        self.period = period
+        self._clock = clock
+        self._last: dict = {}
+        self._held: dict = {}
+
+    def __call__(self, kind: str) -> int | None:
+        now = self._clock()
+        if now - self._last.get(kind, -math.inf) < self.period:
+            self._held[kind] = self._held.get(kind, 0) + 1
+            return None
+        self._last[kind] = now
+        return self._held.pop(kind, 0)

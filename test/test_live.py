@@ -5,11 +5,10 @@ import numpy as np
 import pytest
 
 from panel_deploy.build import build_model
-from panel_deploy.collision import CollisionSettings, check_trajectory
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_states
-from panel_deploy.errors import SceneError, TrajectoryError
-from panel_deploy.live import (Deployment, DynamicsParameters, Pacer, StreamCheck, apply_stiffness,
+from panel_deploy.errors import SceneError
+from panel_deploy.live import (Deployment, DynamicsParameters, Pacer, apply_stiffness,
                                configure, optimisation_scene, scene_from_yaml, scene_yaml)
 from panel_deploy.scene import load_scene, resolve_scene
 
@@ -123,24 +122,6 @@ def test_optimisation_scene_validates_overrides(scene):
     assert s.optimisation.method == scene.optimisation.method
     with pytest.raises(SceneError, match=r"optimisation\.max_evaluations"):
         optimisation_scene(scene, max_evaluations=-3)
-
-
-def test_stream_check_matches_the_batch_check_and_restarts(short):
-    scene, model = short
-    result = simulate(model, scene.simulation)
-    settings = CollisionSettings.from_scene(scene)
-    batch = check_trajectory(model, result, settings)
-    stream = StreamCheck(model, settings)
-    for _ in range(2):  # the second pass starts again at t = 0: a new deployment
-        for j in range(len(result.t)):
-            stream.update(result.t[j], result.theta[j], result.omega[j])
-        first = stream.check.first_events[0]
-        assert first.names == batch.first_collision.names and first.t == batch.first_collision.t
-        level, message, values = stream.verdict()
-        assert level == 2 and values["first_collision_pair"] == list(first.names)
-    assert stream.deployments == 2
-    with pytest.raises(TrajectoryError, match="header.stamp"):
-        stream.update(result.t[50], result.theta[50], result.omega[50])
 
 
 def test_pacer_keeps_real_time():

@@ -22,8 +22,9 @@ from .monitor import CollisionEvent, CollisionMonitor, CollisionSettings
 class CollisionReport:
     """What the collision check found on one trajectory.
 
-    Shapes: P checked pairs, s_c samples checked (up to and including the
-    sample that revealed the first collision).
+    Shapes: P checked pairs, s_c samples kept (up to and including the
+    sample that revealed the first collision; a live check keeps the last
+    ones only, from ``first_sample`` on).
 
     Attributes
     ----------
@@ -31,15 +32,15 @@ class CollisionReport:
         Body indices of every checked pair (``model.collision_pairs``).
     pair_names : list of (str, str)
     t : (s_c,) ndarray
-        Sample instants checked, s.
+        Sample instants kept, s.
     distances : (s_c, P) ndarray
         Signed distance D_j of every pair, m (the paper's D_j is
         ``max(distances, 0)``); where ``exact`` is False, a lower bound above
         ``collision.margin`` (broad phase).
     exact : (s_c, P) ndarray of bool
     n_valid : int
-        Samples before the first collision (all if none): rows ``[:n_valid]``
-        are the valid trajectory.
+        Samples before the first collision (all if none): rows
+        ``[:n_valid - first_sample]`` are the valid trajectory.
     first_collision : CollisionEvent or None
         The earliest collision.
     events : list of CollisionEvent
@@ -62,6 +63,8 @@ class CollisionReport:
         What the check used.
     wall_time : float
         s spent in the check.
+    first_sample : int
+        Index of the sample in row 0 (samples before it were not kept).
     """
 
     pairs: np.ndarray
@@ -81,6 +84,11 @@ class CollisionReport:
     collision: CollisionSettings
     wall_time: float = 0.0
     flat_contact: np.ndarray = field(default=None, repr=False)
+    first_sample: int = 0
+
+    @property
+    def samples_checked(self) -> int:
+        return self.first_sample + len(self.t)
 
     @property
     def collided(self) -> bool:
@@ -89,7 +97,8 @@ class CollisionReport:
     @property
     def valid_until(self) -> float:
         """Last valid sample instant, s (nan if even the first sample collides)."""
-        return float(self.t[self.n_valid - 1]) if self.n_valid else math.nan
+        row = self.n_valid - 1 - self.first_sample
+        return float(self.t[row]) if 0 <= row < len(self.t) else math.nan
 
     def first_collision_dict(self) -> dict | None:
         """The first collision as plain values (time, pair, point, speeds), or None."""
@@ -109,7 +118,7 @@ class CollisionReport:
             "d": None if math.isinf(self.d) else self.d,
             "d_time": None if math.isnan(self.d_time) else self.d_time,
             "d_pair": list(self.d_pair) if self.d_pair else None,
-            "samples_checked": int(len(self.t)),
+            "samples_checked": self.samples_checked,
             "valid_samples": int(self.n_valid),
             "valid_until": None if math.isnan(self.valid_until) else self.valid_until,
             "pairs_checked": int(len(self.pairs)),
@@ -127,13 +136,15 @@ class CollisionReport:
         """A few lines of text for the command line."""
         lines = []
         if self.first_collision is None:
-            lines.append(f"no collision in {len(self.t)} samples up to t = {self.t[-1]:.4f} s"
+            lines.append(f"no collision in {self.samples_checked} samples up to t = {self.t[-1]:.4f} s"
                          if len(self.t) else "no samples")
         else:
             e = self.first_collision
             touch = f", first touch at {e.contact_time:.4f} s" if e.contact_time is not None else ""
-            lines.append(f"first collision at t = {e.t:.4f} s (sample {e.sample}, "
-                         f"t_j = {self.t[e.sample]:.4f} s{touch}): {e.names[0]} - {e.names[1]}"
+            row = e.sample - self.first_sample
+            t_j = f", t_j = {self.t[row]:.4f} s" if 0 <= row < len(self.t) else ""
+            lines.append(f"first collision at t = {e.t:.4f} s (sample {e.sample}"
+                         f"{t_j}{touch}): {e.names[0]} - {e.names[1]}"
                          f"{' (between samples)' if e.refined else ''}")
             lines.append(f"  at ({e.point[0]:.4f}, {e.point[1]:.4f}, {e.point[2]:.4f}) m, "
                          f"approach speed v = {self.v:.4f} m/s (Eq. 7), "
@@ -194,9 +205,12 @@ class TrajectoryCheck:
     collision : CollisionSettings, CollisionSection or Scene, optional
     capacity : int
         Samples to preallocate D_j for (it grows when exceeded).
+    keep : int, optional
+        Keep D_j of the last ``keep`` to ``2 keep`` samples only (a live
+        stream's memory stays bounded); None keeps every sample.
     """
 
-    def __init__(self, model: Model, collision=None, capacity: int = 64):
+    def __init__(self, model: Model, collision=None, capacity: int = 64, keep: int | None = None):
         self._start = time.perf_counter()
         self.collision = _collision_settings(collision)
         self.monitor = CollisionMonitor(model, self.collision)
@@ -205,6 +219,8 @@ class TrajectoryCheck:
         self._D = np.empty((capacity, P))
         self._exact = np.empty((capacity, P), dtype=bool)
         self.checked = 0
+        self.keep = keep
+        self._dropped = 0
         self.first_events: list = []
         self.n_valid = None
         self.d, self.d_time, self.d_pair = math.inf, math.nan, None
@@ -234,23 +250,29 @@ class TrajectoryCheck:
         """Check one sample (``poses`` as :meth:`CollisionMonitor.update`); the collision events it revealed."""
         m = self.monitor
         events = m.update(t, theta, omega, poses)
-        j = self.checked
+        j = self.checked - self._dropped
+        if self.keep is not None and j == 2 * self.keep:
+            # Amortised O(P) per sample: drop the older half once per keep samples.
+            for rows in (self._t, self._D, self._exact):
+                rows[:self.keep] = rows[self.keep:j]
+            self._dropped += self.keep
+            j = self.keep
         if j == len(self._t):
-            grow = max(64, j)
+            grow = max(64, j) if self.keep is None else min(max(64, j), 2 * self.keep - j)
             self._t = np.concatenate([self._t, np.empty(grow)])
             self._D = np.concatenate([self._D, np.empty((grow, self._D.shape[1]))])
             self._exact = np.concatenate([self._exact, np.empty((grow, self._D.shape[1]), bool)])
         self._t[j], self._D[j], self._exact[j] = t, m.distances, m.exact
-        self.checked = j + 1
+        self.checked += 1
         if events and not self.first_events:
-            self.first_events, self.n_valid = events, j
+            self.first_events, self.n_valid = events, self.checked - 1
         if not self.first_events and m.min_distance < self.d:
             self.d, self.d_time, self.d_pair = m.min_distance, float(t), m.pair_names(m.min_pair)
         return events
 
     def report(self) -> CollisionReport:
         """The :class:`CollisionReport` of everything fed so far."""
-        m, P, n = self.monitor, len(self.monitor.pairs), self.checked
+        m, P, n = self.monitor, len(self.monitor.pairs), self.checked - self._dropped
         # Eq. (7) needs two earlier samples; before that the kinematic speed stands in.
         V = np.zeros(P)
         for e in self.first_events:
@@ -258,10 +280,10 @@ class TrajectoryCheck:
         return CollisionReport(
             pairs=m.pairs, pair_names=[m.pair_names(k) for k in range(P)],
             t=self._t[:n].copy(), distances=self._D[:n].copy(), exact=self._exact[:n].copy(),
-            n_valid=n if self.n_valid is None else self.n_valid,
+            n_valid=self.checked if self.n_valid is None else self.n_valid,
             first_collision=self.first_events[0] if self.first_events else None,
             events=self.first_events, V=V, v=float(V.max()) if self.first_events else 0.0,
             d=self.d, d_time=self.d_time, d_pair=self.d_pair,
             counters=dict(m.counters, exact_fallbacks=m.exact_fallbacks),
             collision=self.collision, wall_time=time.perf_counter() - self._start,
-            flat_contact=m.flat_contact)
+            flat_contact=m.flat_contact, first_sample=self._dropped)

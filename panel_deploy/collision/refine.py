@@ -43,6 +43,12 @@ from .motion import _rate_bound, _speed_bound, hinge_radii_of, needed_radii
 LO, HI, STAGE, COUNT = 0, 1, 2, 3
 # Stages: to be bounded, left half searched, done.
 BOUND, LEFT_DONE, DONE = 0, 1, 2
+#: Shortest interval the search splits, as a fraction of the time resolution:
+#: with it no search is deeper than log2((t_1 - t_0) / (MIN_SPLIT time_resolution))
+#: levels (63 for a one-hour interval at 1 us), so its stack stays a few kB.
+MIN_SPLIT = 1e-6
+#: Levels of stack that :func:`stack` may be asked for at most.
+MAX_DEPTH = 128
 
 
 @njit(cache=True)
@@ -185,9 +191,13 @@ def refine_interval(geo, seg, lim, t1, D0, D1, radii0, radii1, colliding, work):
             Sa, Sb = S_at[lo, k], S_at[hi, k]
             # A pair with Sb below the threshold is being located, not bounded:
             # stop at the time resolution. Every other open pair closes once
-            # L (b - a) / 2 <= resolution, as both its ends are >= threshold.
+            # L (b - a) / 2 <= resolution, as both its ends are >= threshold,
+            # or once the interval is below MIN_SPLIT of the time resolution:
+            # stamps of a few hundred ns (or times whose float spacing is
+            # about the interval) would otherwise be halved forever.
             if ((Sa + Sb - L[i] * (b - a)) / 2.0 < threshold - resolution and np.isnan(found_t[k])
-                    and not (Sb < threshold and b - a <= time_resolution)):
+                    and not (Sb < threshold and b - a <= time_resolution)
+                    and b - a > MIN_SPLIT * time_resolution and a < 0.5 * (a + b) < b):
                 if d + 1 == frame.shape[0]:
                     return found_t, last_touch, order[:0], 0, -1, False
                 given[d + 1, n_open] = k

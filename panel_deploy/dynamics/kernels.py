@@ -349,6 +349,22 @@ def largest_gap(P, R, p):
 
 
 @njit(cache=True)
+def loop_residual(P, theta):
+    """How far tree angles ``theta`` (rad) are from closing every loop: per cut
+    hinge j, row j holds M_b - M_a and N_b - N_a (m, the gaps of its two ends,
+    :func:`_cut_ends`) and its angle (rad, :func:`_cut_angle`); (m, 7)."""
+    R, p, _, _, _ = kinematics(P, theta, np.zeros(theta.shape[0]))
+    out = np.empty((P.cut_a.shape[0], 7))
+    for j in range(P.cut_a.shape[0]):
+        Ma, Na, Mb, Nb = _cut_ends(P, j, R, p)
+        for i in range(3):
+            out[j, i] = Mb[i] - Ma[i]
+            out[j, 3 + i] = Nb[i] - Na[i]
+        out[j, 6] = _cut_angle(P, j, R)[0]
+    return out
+
+
+@njit(cache=True)
 def _add_wrench(F, body, torque, force, point):
     """Add a force applied at ``point`` plus a torque to body's wrench about the origin."""
     t = _add(torque, _cross(point, force))

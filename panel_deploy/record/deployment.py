@@ -15,13 +15,12 @@ end, the outcome on ``/diagnostics`` and as the ``outcome`` metadata record.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 
-from ..collision import CollisionSettings
+from ..collision import CollisionSettings, StreamCheck
 from ..export.urdf import model_urdf
-from ..live import Deployment, StreamCheck, scene_yaml
+from ..live import Deployment, scene_yaml
 from ..summary import deployment_summary
 from . import messages as m
 from .cdr import SampleEncoder
@@ -69,18 +68,19 @@ def _integrator_record(scene) -> dict:
             "flat_tolerance": s.flat_tolerance, "collision_tolerance": scene.collision.tolerance}
 
 
-def outcome_record(summary: dict, report) -> dict:
-    """The ``outcome`` metadata record: success, time to flat (s), first
-    collision (t s, pair, approach speed v m/s) and the smallest distance d (m)."""
-    first = report.first_collision
+def outcome_record(summary: dict) -> dict:
+    """The ``outcome`` metadata record of a :func:`deployment_summary` with its
+    collision part: success, time to flat (s), first collision (t s, pair,
+    approach speed v m/s) and the smallest distance d (m)."""
+    c = summary["collision"]
+    first = c["first_collision"]
     return {"success": bool(summary["success"]), "message": summary["message"],
             "t_end": summary["t_end"], "time_to_flat": summary["time_to_flat"],
-            "collided": report.collided,
-            "first_collision_t": None if first is None else float(first.t),
-            "first_collision_pair": None if first is None else list(first.names),
-            "approach_speed": float(report.v) if first is not None else None,
-            "d": None if math.isinf(report.d) else float(report.d),
-            "wall_time": summary["wall_time"]}
+            "collided": c["collided"],
+            "first_collision_t": None if first is None else float(first["t"]),
+            "first_collision_pair": None if first is None else list(first["pair"]),
+            "approach_speed": float(c["v"]) if first is not None else None,
+            "d": None if c["d"] is None else float(c["d"]), "wall_time": summary["wall_time"]}
 
 
 def record_deployment(path, scene, model):
@@ -128,7 +128,7 @@ def record_deployment(path, scene, model):
         rec.write("/diagnostics", m.DIAGNOSTIC_ARRAY, m.diagnostics(
             t_end, m.outcome_status(summary),
             m.status(m.MONITOR_STATUS, level, text, values)), m.nanoseconds(t_end))
-        rec.metadata("outcome", outcome_record(summary, report))
+        rec.metadata("outcome", outcome_record(summary))
     return result, report
 
 

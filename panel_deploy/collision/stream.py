@@ -1,0 +1,210 @@
+"""Collision check of a live joint-state stream: a simulator's, or a real array's encoders.
+
+A real stream is not a trajectory file: its stamps are wall-clock times (or
+unfilled zeros), it skips samples, its angles are noisy, and it may carry a
+spanning set of hinges other than the tree's. :class:`StreamCheck` turns
+such a stream into the samples a :class:`~.check.TrajectoryCheck` takes:
+
+- times are counted from the deployment's first stamp, so a stamp of
+  1.7e9 s (epoch time) keeps its sub-microsecond spacing;
+- a stamp at or before the deployment's first one, once it has moved on,
+  starts a new deployment (a replay, the next run); any other stamp that
+  does not move forward is refused (an unfilled zero stamp repeats);
+- a gap, an interval over ``GAP_FACTOR`` times the median of the last
+  ``GAP_WINDOW`` ones, is counted and reported (:attr:`StreamCheck.last_gap`):
+  collisions inside it are located on interpolated motion;
+- hinges the stream lacks are solved from the loop closure
+  (:class:`~panel_deploy.sensing.LoopSolver`), once per set of names;
+- D_j is kept for the last ``KEEP`` samples only, so memory is bounded.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from ..dynamics.report import hinge_order
+from ..errors import TrajectoryError
+from ..model import Model
+from ..sensing import LoopSolver
+from .check import TrajectoryCheck
+from .monitor import CollisionSettings
+
+#: Samples whose D_j a live check keeps (between KEEP and 2 KEEP).
+KEEP = 4096
+#: An interval this many times the median recent one is a gap.
+GAP_FACTOR = 5.0
+#: Intervals the median is taken over; no gap is reported before this many.
+GAP_WINDOW = 16
+
+
+class StreamCheck:
+    """Collision check of a joint-state stream, one deployment at a time.
+
+    Parameters
+    ----------
+    model : Model
+    collision : CollisionSettings
+
+    Attributes
+    ----------
+    names : list of str
+        Every hinge a stream may carry (tree hinges, then cut hinges).
+    required : list of str
+        The tree hinges, in coordinate order: without the loop closure a
+        stream would have to carry these.
+    check : TrajectoryCheck or None
+        The current deployment's check (None before its first sample).
+    deployments : int
+        Deployments seen.
+    origin : float or None
+        The current deployment's first stamp, s: its times count from here.
+    refused : dict of str -> int
+        Messages refused in the current deployment, by field.
+    gaps : int
+        Gaps in the current deployment.
+    largest_gap : float
+        Its longest interval between samples, s.
+    last_gap : float or None
+        The interval before the last sample when it was a gap, s.
+    solved : list of str
+        Hinges the last sample solved from the loop closure.
+    """
+
+    def __init__(self, model: Model, collision: CollisionSettings):
+        self.model = model
+        self.collision = collision
+        self.names = [model.hinges[h].name for h in hinge_order(model)]
+        self.required = self.names[:model.n_coords]
+        self._solvers: dict = {}
+        self.check = None
+        self.deployments = 0
+        self.origin = None
+        self.refused: dict = {}
+        self.gaps, self.largest_gap, self.last_gap = 0, 0.0, None
+        self.solved: list = []
+        self._intervals = deque(maxlen=GAP_WINDOW)
+        self._last = None
+
+    def reset(self) -> None:
+        """Forget the current deployment: the next sample starts a new one."""
+        self.check = None
+
+    def refuse(self, field: str) -> None:
+        """Count a message refused for ``field`` (the node's reading errors too)."""
+        self.refused[field] = self.refused.get(field, 0) + 1
+
+    def update(self, t: float, theta, omega=None) -> list:
+        """Check the sample at stamp ``t`` (s); ``theta``, ``omega`` (rad, rad/s)
+        of :attr:`required`. Returns the collision events it revealed.
+
+        Raises
+        ------
+        TrajectoryError
+            A stamp that is neither after the last nor a new deployment's, or
+            an interval the check cannot search; nothing is changed.
+        """
+        if self.check is not None and t <= self.origin and self._last > self.origin:
+            self.check = None
+        elif self.check is not None and not t > self._last:
+            raise TrajectoryError(f"header.stamp: {t:.9g} s is not after the last sample "
+                                  f"({self._last:.9g} s)")
+        if self.check is None:
+            return self._start(t, theta, omega)
+        events = self.check.update(t - self.origin, theta, omega)
+        self._interval(t - self._last)
+        self._last = t
+        return events
+
+    def update_joints(self, t: float, names, position, velocity=None) -> list:
+        """:meth:`update` from a message's hinges: ``names`` any set the loop
+        closure completes, ``position`` (rad) and ``velocity`` (rad/s, or None)
+        in the same order.
+
+        Raises
+        ------
+        TrajectoryError
+            Names that do not determine the tree's angles (naming one), or
+            angles that cannot close the loop; nothing is changed.
+        """
+        theta, omega = self.coordinates(names, position, velocity)
+        return self.update(t, theta, omega)
+
+    def coordinates(self, names, position, velocity=None) -> tuple:
+        """Tree angles and rates (None without ``velocity``) of a message's hinges."""
+        index = {name: i for i, name in enumerate(names)}
+        position = np.asarray(position, dtype=float)
+        velocity = None if velocity is None else np.asarray(velocity, dtype=float)
+        if all(h in index for h in self.required):
+            rows = [index[h] for h in self.required]
+            self.solved = []
+            return position[rows], None if velocity is None else velocity[rows]
+        key = frozenset(index)
+        if key not in self._solvers:
+            self._solvers[key] = LoopSolver(self.model, key)
+        solver = self._solvers[key]
+        known = [index[solver.tree_names[i]] for i in solver.known]
+        cuts = [index[name] for name in solver.cut_names]
+        theta, omega = solver.solve(position[known], position[cuts],
+                                    None if velocity is None else velocity[known],
+                                    None if velocity is None else velocity[cuts])
+        self.solved = [solver.tree_names[i] for i in solver.missing]
+        return theta, omega
+
+    def _start(self, t, theta, omega) -> list:
+        check = TrajectoryCheck(self.model, self.collision, keep=KEEP)
+        events = check.update(0.0, theta, omega)
+        self.check, self.origin, self._last = check, t, t
+        self.deployments += 1
+        self.refused = {}
+        self.gaps, self.largest_gap, self.last_gap = 0, 0.0, None
+        self._intervals.clear()
+        return events
+
+    def _interval(self, dt: float) -> None:
+        typical = self.typical_interval
+        self.last_gap = dt if typical is not None and dt > GAP_FACTOR * typical else None
+        if self.last_gap is not None:
+            self.gaps += 1
+        else:
+            self._intervals.append(dt)
+        self.largest_gap = max(self.largest_gap, dt)
+
+    @property
+    def typical_interval(self) -> float | None:
+        """Median of the recent intervals between samples, s (None before there are enough)."""
+        return float(np.median(self._intervals)) if len(self._intervals) == GAP_WINDOW else None
+
+    def verdict(self) -> tuple:
+        """``(level, message, values)``: level 0 no collision so far, 1 a
+        clean verdict the stream's faults (refused messages, gaps) put in
+        doubt, 2 collided. Times in ``values`` count from ``origin``."""
+        c = self.check
+        if c is None:
+            return 0, "waiting for joint states", {"deployment": self.deployments}
+        refused = sum(self.refused.values())
+        values = {"deployment": self.deployments, "origin": self.origin,
+                  "t": self._last - self.origin, "samples": c.checked,
+                  "d": None if c.d == math.inf else c.d, "d_pair": list(c.d_pair or ()),
+                  "d_time": None if c.d_pair is None else c.d_time,
+                  "distance_now": c.monitor.min_distance, "refused": refused,
+                  "gaps": self.gaps, "largest_gap": self.largest_gap,
+                  "solved": list(self.solved)}
+        values.update({f"refused_{field}": n for field, n in self.refused.items()})
+        if c.collided:
+            e = c.first_events[0]
+            values.update(first_collision_pair=list(e.names), first_collision_t=e.t,
+                          approach_speed=max(x.approach_speed if math.isfinite(x.approach_speed)
+                                             else x.normal_speed for x in c.first_events))
+            return 2, f"collision between {e.names[0]} and {e.names[1]} at t = {e.t:.4f} s", values
+        faults = []
+        if refused:
+            worst = max(self.refused, key=self.refused.get)
+            faults.append(f"{refused} joint states refused ({worst}: {self.refused[worst]})")
+        if self.gaps:
+            faults.append(f"{self.gaps} gaps in the stream (longest {self.largest_gap * 1e3:.1f} ms)")
+        if faults:
+            return 1, "no collision seen, but " + "; ".join(faults), values
+        return 0, "no collision", values

@@ -1,0 +1,238 @@
+"""panel_deploy.collision.stream and .sensing: a live stream as a real array sends it
+(epoch and unfilled stamps, gaps, noise, hinges it does not carry), checked
+against the clean batch check of the same deployment."""
+
+import math
+import resource
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from panel_deploy.collision import CollisionSettings, StreamCheck, check_trajectory
+from panel_deploy.collision.refine import MAX_DEPTH
+from panel_deploy.collision.stream import KEEP
+from panel_deploy.dynamics import simulate
+from panel_deploy.dynamics.report import hinge_states
+from panel_deploy.errors import TrajectoryError
+from panel_deploy.live import DynamicsParameters, Throttle, configure
+from panel_deploy.scene import load_scene, resolve_scene
+from panel_deploy.sensing import LoopSolver
+
+#: The paper scene's first collision (test_dynamics_paper pins it at 200 Hz).
+FIRST_PAIR = ("r1c2+r1c3", "r2c2+r2c3")
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene(resolve_scene("paper_4x4"))
+
+
+def _run(scene, rate_hz, t_end=0.5, **overrides):
+    s, model = configure(scene.replace(closure=replace(scene.closure, **overrides))
+                         if overrides else scene, DynamicsParameters(t_end=t_end, rate_hz=rate_hz))
+    return s, model, simulate(model, s.simulation)
+
+
+@pytest.fixture(scope="module")
+def khz(scene):
+    """The paper deployment to just past its first collision at 1 kHz."""
+    return _run(scene, 1000.0)
+
+
+@pytest.fixture(scope="module")
+def clean(khz):
+    s, model, result = khz
+    return check_trajectory(model, result, CollisionSettings.from_scene(s)).first_collision
+
+
+def _feed(model, settings, t, theta, omega=None):
+    stream = StreamCheck(model, settings)
+    first = None
+    for j in range(len(t)):
+        events = stream.update(t[j], theta[j], None if omega is None else omega[j])
+        if events and first is None:
+            first = events[0]
+    return stream, first
+
+
+def test_stream_matches_the_batch_check_and_restarts(scene):
+    s, model, result = _run(scene, 200.0)
+    settings = CollisionSettings.from_scene(s)
+    batch = check_trajectory(model, result, settings)
+    stream = StreamCheck(model, settings)
+    for _ in range(2):  # the second pass starts again at t = 0: a new deployment
+        for j in range(len(result.t)):
+            stream.update(result.t[j], result.theta[j], result.omega[j])
+        first = stream.check.first_events[0]
+        assert first.names == batch.first_collision.names and first.t == batch.first_collision.t
+        level, message, values = stream.verdict()
+        assert level == 2 and values["first_collision_pair"] == list(first.names)
+        assert values["approach_speed"] == pytest.approx(batch.v, rel=1e-12)
+    assert stream.deployments == 2
+    with pytest.raises(TrajectoryError, match="header.stamp"):
+        stream.update(result.t[50], result.theta[50], result.omega[50])
+
+
+def test_epoch_stamps_with_sub_microsecond_spacing_stay_bounded(khz, clean):
+    """Wall-clock stamps (1.76e9 s) arriving in bursts 0.3 us apart: the
+    between-sample search used to halve such intervals forever (1 GB stacks)."""
+    s, model, result = khz
+    rng = np.random.default_rng(1)
+    ns = 1_764_000_000_000_000_000 + np.cumsum(rng.choice([300, 1000, 500_000, 2_000_000],
+                                                           size=len(result.t)))
+    stamps = ns // 10**9 + (ns % 10**9) * 1e-9
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    stream, first = _feed(model, CollisionSettings.from_scene(s), stamps, result.theta)
+    grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    assert len(stream.check.monitor._stack[3]) <= MAX_DEPTH
+    assert grown_mb < 50
+    assert stream.check.checked == len(result.t)
+    assert stream.origin == stamps[0] and first is not None
+    # Times count from the first stamp: a deployment time, not an epoch.
+    assert 0 < first.t < 2.0
+
+
+def test_unfilled_stamps_are_refused_not_new_deployments(khz):
+    s, model, result = khz
+    stream = StreamCheck(model, CollisionSettings.from_scene(s))
+    stream.update(0.0, result.theta[0])
+    for j in range(1, 50):
+        with pytest.raises(TrajectoryError, match="header.stamp"):
+            stream.update(0.0, result.theta[j])
+        stream.refuse("header.stamp")
+    level, message, values = stream.verdict()
+    assert stream.deployments == 1 and level == 1
+    assert values["refused"] == 49 and "49 joint states refused" in message
+
+
+def test_a_gap_is_counted_and_reported(khz, clean):
+    s, model, result = khz
+    keep = (result.t < clean.t - 0.09) | (result.t > clean.t + 0.01)  # 100 ms missing over the impact
+    stream, first = _feed(model, CollisionSettings.from_scene(s), result.t[keep], result.theta[keep],
+                          result.omega[keep])
+    level, message, values = stream.verdict()
+    assert stream.gaps == 1 and values["largest_gap"] == pytest.approx(0.101, abs=1.5e-3)
+    assert first is not None and level == 2
+    clean_stream, _ = _feed(model, CollisionSettings.from_scene(s), result.t, result.theta,
+                            result.omega)
+    assert clean_stream.gaps == 0 and clean_stream.verdict()[0] == 2
+
+
+def test_approach_speed_on_a_fixed_grid_is_rate_independent(scene):
+    """Eq. (7) over 5 ms whatever the rate: 200 Hz and 1 kHz streams agree,
+    and on the 200 Hz grid it is Eq. (7) of the samples themselves."""
+    speeds = {}
+    for rate in (200.0, 1000.0):
+        s, model, result = _run(scene, rate)
+        plain = check_trajectory(model, result, CollisionSettings.from_scene(s))
+        gridded = check_trajectory(model, result, CollisionSettings.from_scene(s, speed_interval=0.005))
+        assert gridded.first_collision.names == plain.first_collision.names == FIRST_PAIR
+        speeds[rate] = (plain.v, gridded.v)
+    assert speeds[200.0][1] == pytest.approx(speeds[200.0][0], rel=1e-9)
+    assert speeds[200.0][0] == pytest.approx(4.23, abs=0.01)
+    assert abs(speeds[1000.0][0] - speeds[200.0][0]) > 0.1          # Eq. (7) of the samples
+    assert speeds[1000.0][1] == pytest.approx(speeds[200.0][1], rel=0.01)  # on the 5 ms grid
+
+
+@pytest.mark.parametrize("sigma", [1e-4, 1e-3, 3e-3])
+def test_noise_aware_check_has_no_false_alarm_and_finds_the_impact(khz, clean, sigma):
+    s, model, result = khz
+    truth = check_trajectory(model, result, CollisionSettings.from_scene(s), stop_at_first=False)
+    colliding = {e.names for e in truth.events}  # every pair in contact by that sample
+    rng = np.random.default_rng(7)
+    noisy = result.theta + rng.normal(0.0, sigma, result.theta.shape)
+    _, first = _feed(model, CollisionSettings.from_scene(s, noise=sigma), result.t, noisy)
+    assert first is not None and first.names in colliding | {("r1c1", "r2c2+r2c3")}
+    assert 0.0 <= first.t - clean.t <= 4e-3 + 1e3 * sigma * 1e-3
+
+
+def test_noise_blind_check_raises_false_alarms(khz, clean):
+    """What the noise parameter is for: the same stream with noise 0 reports a
+    collision long before the real one."""
+    s, model, result = khz
+    noisy = result.theta + np.random.default_rng(7).normal(0.0, 1e-3, result.theta.shape)
+    _, first = _feed(model, CollisionSettings.from_scene(s, refine=False), result.t, noisy)
+    assert first is not None and first.t < clean.t - 0.05
+
+
+def test_noise_setting_is_checked():
+    with pytest.raises(Exception, match="collision.noise"):
+        CollisionSettings(noise=-1e-3)
+    with pytest.raises(Exception, match="collision.noise"):
+        CollisionSettings(noise=math.inf)
+
+
+@pytest.fixture(scope="module")
+def exact(scene):
+    """The exact closure, so that the loop closes to rounding and the solved
+    angles can be compared with the simulated ones."""
+    return _run(scene, 500.0, t_end=0.45, method="exact")
+
+
+def test_loop_solver_recovers_every_loop_hinge(exact):
+    s, model, result = exact
+    names, theta, omega, _ = hinge_states(model, result)
+    n = model.n_coords
+    loop = [h for h in names[:n] if h not in ("r3c2-r4c2", "r2c2-r3c2")]
+    for dropped in loop:
+        solver = LoopSolver(model, [h for h in names if h != dropped])
+        assert [solver.tree_names[i] for i in solver.missing] == [dropped]
+        cut = [names.index(c) for c in solver.cut_names]
+        worst = worst_rate = 0.0
+        for j in range(0, len(result.t), 5):
+            th, om = solver.solve(theta[j, solver.known], theta[j, cut], omega[j, solver.known],
+                                  omega[j, cut])
+            worst = max(worst, np.abs(th - theta[j, :n]).max())
+            worst_rate = max(worst_rate, np.abs(om - omega[j, :n]).max())
+        assert worst < 1e-7, dropped
+        assert worst_rate < 1e-4 * max(1.0, np.abs(omega).max()), dropped
+
+
+def test_loop_solver_names_what_it_cannot_solve(exact):
+    s, model, result = exact
+    names = hinge_states(model, result)[0]
+    with pytest.raises(TrajectoryError, match="'r2c2-r3c2'.*on no loop"):
+        LoopSolver(model, [h for h in names if h != "r2c2-r3c2"])
+    loop = [h for h in names[:model.n_coords] if h not in ("r3c2-r4c2", "r2c2-r3c2")]
+    # Seven unknowns against the six closure equations of one loop.
+    with pytest.raises(TrajectoryError, match="do not determine"):
+        LoopSolver(model, [h for h in names if h not in loop[:7]])
+
+
+def test_stream_without_a_loop_hinge_gives_the_same_verdict(khz, clean):
+    s, model, result = khz
+    names, theta, omega, _ = hinge_states(model, result)
+    carried = [h for h in names if h != "r2c1-r3c1"]
+    rows = [names.index(h) for h in carried]
+    stream = StreamCheck(model, CollisionSettings.from_scene(s))
+    first = None
+    for j in range(len(result.t)):
+        th, om = stream.coordinates(carried, theta[j, rows], omega[j, rows])
+        events = stream.update(result.t[j], th, om)
+        first = first or (events[0] if events else None)
+    assert stream.solved == ["r2c1-r3c1"]
+    assert first.names == clean.names and abs(first.t - clean.t) <= 1e-3
+
+
+def test_live_check_keeps_bounded_rows(khz):
+    s, model, result = khz
+    stream = StreamCheck(model, CollisionSettings.from_scene(s, refine=False))
+    t = np.arange(2 * KEEP + 10) * 1e-4
+    still = np.repeat(result.theta[:1], len(t), axis=0)
+    for j in range(len(t)):
+        stream.update(t[j], still[j])
+    report = stream.check.report()
+    assert KEEP <= len(report.t) <= 2 * KEEP
+    assert report.samples_checked == len(t) == stream.check.checked
+    assert report.t[-1] == pytest.approx(t[-1])
+
+
+def test_throttle_holds_back_and_counts():
+    now = [0.0]
+    throttle = Throttle(1.0, clock=lambda: now[0])
+    assert throttle("stamp") == 0
+    assert [throttle("stamp") for _ in range(5)] == [None] * 5
+    assert throttle("gap") == 0  # kinds are throttled apart
+    now[0] = 1.5
+    assert throttle("stamp") == 5

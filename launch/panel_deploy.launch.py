@@ -2,8 +2,10 @@
 
     ros2 launch panel_deploy panel_deploy.launch.py scene:=paper_4x4 real_time_factor:=1.0
 
-Arguments: scene, rate_hz, real_time_factor, use_sim_time. Then
-``ros2 service call /dynamics/deploy std_srvs/srv/Trigger`` deploys the array.
+Arguments: scene, rate_hz, real_time_factor, use_sim_time, namespace. Then
+``ros2 service call /dynamics/deploy std_srvs/srv/Trigger`` deploys the array;
+with ``namespace:=array1`` every topic and service but /diagnostics and
+/clock is under /array1, so that several arrays run side by side.
 """
 
 import os
@@ -29,6 +31,8 @@ def generate_launch_description():
                               description="simulated seconds per wall second (0: as fast as computed)"),
         DeclareLaunchArgument("use_sim_time", default_value="false",
                               description="nodes take their time from /clock"),
+        DeclareLaunchArgument("namespace", default_value="",
+                              description="namespace of the four nodes (one per array)"),
     ]
     sim_time = ParameterValue(LaunchConfiguration("use_sim_time"), value_type=bool)
     overrides = {
@@ -38,6 +42,7 @@ def generate_launch_description():
                                                         value_type=float)},
     }
     nodes = [Node(package="panel_deploy", executable=name, name=name, output="screen",
+                  namespace=LaunchConfiguration("namespace"),
                   parameters=[params, {"use_sim_time": sim_time, **overrides.get(name, {})}])
              for name in NODES]
     return LaunchDescription(arguments + nodes)

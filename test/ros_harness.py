@@ -91,12 +91,16 @@ class Client:
 class NodeProcess:
     """A node executable run as its own process with ``--ros-args``."""
 
-    def __init__(self, name, *params, node_name=None):
+    def __init__(self, name, *params, node_name=None, namespace=None, params_file=None):
         args = [executable(name), "--ros-args"]
         for p in params:
             args += ["-p", p]
         if node_name:  # a name of its own, to tell this process from others of its kind
             args += ["-r", f"__node:={node_name}"]
+        if namespace:
+            args += ["-r", f"__ns:={namespace}"]
+        if params_file:
+            args += ["--params-file", str(params_file)]
         self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      text=True, env=os.environ.copy())
 

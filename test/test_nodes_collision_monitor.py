@@ -8,7 +8,7 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from ros_harness import Client, NodeProcess, wait_for
 from sensor_msgs.msg import JointState
-from visualization_msgs.msg import MarkerArray
+from visualization_msgs.msg import Marker, MarkerArray
 
 from panel_deploy.collision import CollisionSettings, check_trajectory
 from panel_deploy.dynamics import simulate
@@ -17,7 +17,7 @@ from panel_deploy.live import DynamicsParameters, configure
 from panel_deploy.nodes import messages
 from panel_deploy.scene import load_scene, resolve_scene
 
-STATUS = "panel_deploy/collision_monitor"
+STATUS = "/collision_monitor"  # the node's full name
 
 
 @pytest.fixture(scope="module")
@@ -78,8 +78,10 @@ def test_first_event_names_the_pair_simulate_finds(graph, deployment):
     dt = result.t[1] - result.t[0]
     assert abs(float(values["t"]) - report.first_collision.t) <= dt
     assert float(values["approach_speed"]) == pytest.approx(report.v, rel=1e-6)
-    wait_for(lambda: markers, what="the collision markers")
-    assert {m.text for m in markers[0].markers if m.ns == "collision"} == set(report.first_collision.names)
+    # The first markers that show a pair (a new deployment first clears the last one's).
+    hits = lambda: [a for a in markers if any(m.ns == "collision" for m in a.markers)]  # noqa: E731
+    wait_for(hits, what="the collision markers")
+    assert {m.text for m in hits()[0].markers if m.ns == "collision"} == set(report.first_collision.names)
     wait_for(lambda: statuses(diagnostics, messages.ERROR), what="an ERROR verdict")
     wait_checked(diagnostics, len(result.t))
 
@@ -124,7 +126,10 @@ def test_malformed_joint_states_warn_and_the_verdict_stays_right(graph, deployme
 def test_reset_starts_a_new_deployment(graph, deployment):
     client, publisher, events, diagnostics, markers = graph
     model, result, report = deployment
+    markers.clear()
     assert client.trigger("/collision_monitor/reset").success
+    wait_for(lambda: markers, what="the markers cleared")  # the last collision's are off displays
+    assert [m.action for m in markers[0].markers] == [Marker.DELETEALL]
     diagnostics.clear()
     feed(publisher, model, result, range(20))  # before the collision: OK again
     wait_checked(diagnostics, 20)

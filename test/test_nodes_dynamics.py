@@ -1,10 +1,13 @@
 """The dynamics node as its own process: streamed deployment, parameters, services."""
 
+import itertools
+import math
 
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.srv import GetParameters, SetParameters
+from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -23,7 +26,9 @@ T_END, RATE = 0.5, 200.0
 @pytest.fixture(scope="module")
 def graph(compiled_nodes):
     model = NodeProcess("array_model", "scene:=paper_4x4")
-    dynamics = NodeProcess("dynamics", f"t_end:={T_END}", f"rate_hz:={RATE}", "real_time_factor:=0.0")
+    # An integer for a double, as ros2 param set and -p send whole numbers: taken as 200.0.
+    dynamics = NodeProcess("dynamics", f"t_end:={T_END}", f"rate_hz:={int(RATE)}",
+                           "real_time_factor:=0.0")
     client = Client("dynamics_test")
     yield client, model, dynamics
     client.close()
@@ -58,7 +63,7 @@ def deploy_and_collect(client):
         box.clear()
     reply = deploy(client)
     assert reply.success, reply.message
-    wait_for(lambda: any(s.name == "panel_deploy/dynamics" for d in diagnostics for s in d.status),
+    wait_for(lambda: any(s.name == "/dynamics" for d in diagnostics for s in d.status),
              timeout=60, what="the outcome on /diagnostics")
     return states, diagnostics, clocks, panels
 
@@ -88,7 +93,7 @@ def test_deploy_streams_the_core_trajectory(graph):
     centres = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z]
                         for m in panels[-1].markers])
     assert np.abs(centres - reference.position[-1]).max() <= 1e-9
-    status = [s for d in diagnostics for s in d.status if s.name == "panel_deploy/dynamics"][-1]
+    status = [s for d in diagnostics for s in d.status if s.name == "/dynamics"][-1]
     values = {kv.key: kv.value for kv in status.values}
     assert values["success"] == "True" and float(values["energy_balance_error"]) < 0.05
 
@@ -133,3 +138,100 @@ def test_stiffness_per_group_is_accepted_and_read_back(graph):
     reply = client.call(GetParameters, "/dynamics/get_parameters",
                         GetParameters.Request(names=["stiffness"]))
     assert list(reply.values[0].double_array_value) == k
+
+
+def get_params(client, *names):
+    return client.call(GetParameters, "/dynamics/get_parameters",
+                       GetParameters.Request(names=list(names))).values
+
+
+def test_integers_for_doubles_are_set_as_doubles(graph):
+    client, *_ = graph
+    assert get_params(client, "rate_hz")[0].double_value == RATE  # given as an integer at start
+    try:
+        results = set_params(client, Parameter("rate_hz", value=500),
+                             Parameter("stiffness", Parameter.Type.INTEGER_ARRAY, [0] * 12))
+        assert all(r.successful for r in results), [r.reason for r in results]
+        rate, k = get_params(client, "rate_hz", "stiffness")
+        assert (rate.type, rate.double_value) == (ParameterType.PARAMETER_DOUBLE, 500.0)
+        assert k.type == ParameterType.PARAMETER_DOUBLE_ARRAY and list(k.double_array_value) == [0.0] * 12
+        refused, = set_params(client, Parameter("rate_hz", value=-5))
+        assert not refused.successful and "rate_hz" in refused.reason
+    finally:
+        set_params(client, Parameter("rate_hz", value=RATE),
+                   Parameter("stiffness", Parameter.Type.DOUBLE_ARRAY, []))
+
+
+def test_ranges_are_in_the_descriptors(graph):
+    client, *_ = graph
+    names = ["rtol", "t_end", "rate_hz", "real_time_factor"]
+    described = client.call(DescribeParameters, "/dynamics/describe_parameters",
+                            DescribeParameters.Request(names=names)).descriptors
+    ranges = {d.name: (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value)
+              for d in described}
+    assert ranges == {"rtol": (0.0, 1.0), "t_end": (0.0, 600.0), "rate_hz": (0.0, 1e6),
+                      "real_time_factor": (0.0, math.inf)}
+
+
+@pytest.mark.parametrize("given, name", [
+    ({"params_file": "rate_hz: -5.0"}, "rate_hz"),
+    ({"params_file": "t_end: 1000.0"}, "t_end"),
+    ({"params_file": "stiffness: [0.1, -0.1]"}, "stiffness"),
+    ({"param": "rate_hz:=fast"}, "rate_hz"),
+    ({"param": "closure:=glue"}, "closure"),
+], ids=["negative rate", "t_end out of range", "negative k", "text for a number", "bad closure"])
+def test_bad_values_at_start_are_one_line_and_exit_2(tmp_path, given, name):
+    params = []
+    path = None
+    if "params_file" in given:  # as a user writes it, for the node in any namespace
+        path = tmp_path / "params.yaml"
+        path.write_text("/**/dynamics:\n  ros__parameters:\n    " + given["params_file"] + "\n")
+    else:
+        params.append(given["param"])
+    proc = NodeProcess("dynamics", *params, params_file=path)
+    _, err = proc.proc.communicate(timeout=60)
+    lines = err.strip().splitlines()
+    assert proc.proc.returncode == 2 and len(lines) == 1, err
+    assert lines[0].startswith("panel-deploy: error:") and name in lines[0], err
+
+
+def test_a_failing_deployment_is_an_error_status_and_the_node_deploys_again(monkeypatch,
+                                                                            compiled_nodes):
+    """The node in this process, its deployment made to fail after three samples."""
+    from panel_deploy.nodes import dynamics as node_module
+
+    class Failing(node_module.Deployment):
+        def __iter__(self):
+            yield from itertools.islice(super().__iter__(), 3)
+            raise RuntimeError("the integrator blew up")
+
+    monkeypatch.setattr(node_module, "Deployment", Failing)
+    model = NodeProcess("array_model", "scene:=paper_4x4", namespace="/guarded")
+    client = Client("dynamics_guard_test")
+    node = node_module.DynamicsNode(context=client.context, namespace="/guarded",
+                                    parameter_overrides=[Parameter("t_end", value=0.1),
+                                                         Parameter("real_time_factor", value=0.0)])
+    client.executor.add_node(node)
+    diagnostics = client.listen(DiagnosticArray, "/diagnostics")
+    outcomes = lambda: [s for d in list(diagnostics) for s in d.status  # noqa: E731
+                        if s.name == "/guarded/dynamics"]
+    try:
+        replies = []
+        wait_for(lambda: replies.append(client.trigger("/guarded/dynamics/deploy"))
+                 or "no model" not in replies[-1].message, what="the model")
+        assert replies[-1].success, replies[-1].message
+        wait_for(outcomes, what="the failure on /diagnostics")
+        failed, = outcomes()
+        assert failed.level == messages.ERROR
+        assert failed.message == "the deployment failed: RuntimeError: the integrator blew up"
+        monkeypatch.undo()
+        wait_for(lambda: not node.running, what="the failed worker to end")
+        assert client.trigger("/guarded/dynamics/deploy").success
+        wait_for(lambda: len(outcomes()) == 2, what="the second outcome")
+        values = messages.values(outcomes()[-1])
+        assert values["success"] == "True" and int(values["samples"]) == 21
+    finally:
+        client.executor.remove_node(node)
+        node.destroy_node()
+        client.close()
+        model.stop()

@@ -3,7 +3,7 @@
 import pytest
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.srv import GetParameters, SetParameters
+from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
@@ -89,8 +89,43 @@ def test_invalid_parameters_are_rejected(graph):
     client, *_ = graph
     for param, reason in ((Parameter("max_evaluations", value=-4), "max_evaluations"),
                           (Parameter("method", value="annealing"), "method"),
+                          (Parameter("workers", value=-2), "workers"),
+                          (Parameter("seed", value=-2), "seed"),
+                          (Parameter("target_node", value=""), "target_node"),
+                          (Parameter("target_node", value="two words"), "target_node"),
                           (Parameter("damping_ratio_bounds", Parameter.Type.DOUBLE_ARRAY, [0.3, 0.1]),
                            "damping_ratio_bounds")):
         result, = client.call(SetParameters, "/optimiser/set_parameters",
                               SetParameters.Request(parameters=[param.to_parameter_msg()])).results
         assert not result.successful and reason in result.reason, result.reason
+
+
+def test_integer_ranges_are_in_the_descriptors(graph):
+    client, *_ = graph
+    described = client.call(DescribeParameters, "/optimiser/describe_parameters",
+                            DescribeParameters.Request(names=["max_evaluations", "workers", "seed"]))
+    assert {d.name: (d.integer_range[0].from_value, d.integer_range[0].to_value)
+            for d in described.descriptors} == {"max_evaluations": (0, 1_000_000),
+                                                "workers": (0, 1024), "seed": (-1, 2**32 - 1)}
+
+
+@pytest.mark.parametrize("param", ["workers:=-2", "target_node:=''", "max_evaluations:=-1"])
+def test_bad_values_at_start_are_one_line_and_exit_2(param):
+    proc = NodeProcess("optimiser", param)
+    _, err = proc.proc.communicate(timeout=60)
+    lines = err.strip().splitlines()
+    assert proc.proc.returncode == 2 and len(lines) == 1, err
+    assert lines[0].startswith("panel-deploy: error:") and param.split(":=")[0] in lines[0], err
+
+
+def test_target_node_resolves_in_the_optimisers_namespace():
+    from panel_deploy.nodes.optimiser import OptimiserNode
+    client = Client("optimiser_namespace_test")
+    node = OptimiserNode(context=client.context, namespace="/array2")
+    try:
+        assert node._target_service("dynamics") == "/array2/dynamics/set_parameters"
+        assert node._target_service("left/dynamics") == "/array2/left/dynamics/set_parameters"
+        assert node._target_service("/array1/dynamics") == "/array1/dynamics/set_parameters"
+    finally:
+        node.destroy_node()
+        client.close()

@@ -40,16 +40,16 @@ def test_launch_file_compiles_and_names_installed_executables():
     assert tuple(ast.literal_eval(nodes)) == NODES
     arguments = {c.args[0].value for c in ast.walk(tree) if isinstance(c, ast.Call)
                  and getattr(c.func, "id", "") == "DeclareLaunchArgument"}
-    assert arguments == {"scene", "rate_hz", "real_time_factor", "use_sim_time"}
+    assert arguments == {"scene", "rate_hz", "real_time_factor", "use_sim_time", "namespace"}
 
 
 def test_params_yaml_keys_are_declared_parameters():
     from panel_deploy.nodes import load
     params = yaml.safe_load((ROOT / "config" / "params.yaml").read_text())
-    assert set(params) == set(NODES)
+    assert set(params) == {f"/**/{name}" for name in NODES}  # in any namespace
     for name in NODES:
         declared = load(name).PARAMETERS
-        given = params[name]["ros__parameters"]
+        given = params[f"/**/{name}"]["ros__parameters"]
         assert set(given) <= set(declared), set(given) - set(declared)
         for key, value in given.items():
             default = declared[key][0]

@@ -93,6 +93,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--record", metavar="FILE.mcap",
                    help="record the graph's topics (and /tf) to MCAP, as ros2 bag record would")
     s.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    s.add_argument("--namespace", default="",
+                   help="ROS namespace of the nodes (e.g. array1: /array1/joint_states), so that "
+                        "graphs of several arrays run side by side")
     add_set(s)
     s.set_defaults(func=_command("run", "run_command"))
 

@@ -17,4 +17,5 @@ def run_command(args) -> int:
     scene = scene_of(args)  # a bad scene is one line here, before any node starts
     return load("graph").run_graph(scene, optimise=args.optimise,
                                    real_time_factor=args.real_time_factor, rate_hz=args.rate,
-                                   as_json=args.json, record=args.record)
+                                   as_json=args.json, record=args.record,
+                                   namespace=args.namespace)

@@ -24,10 +24,9 @@ PARAMETERS = {
 class ArrayModelNode(Node):
     def __init__(self, **kwargs):
         super().__init__("array_model", **kwargs)
-        runtime.declare(self, PARAMETERS)
-        runtime.validator(self, self._check)
-        self.description = self.create_publisher(String, "/robot_description", messages.LATCHED)
-        self.model_pub = self.create_publisher(String, "/panel_deploy/model", messages.LATCHED)
+        runtime.declare(self, PARAMETERS, self._check)
+        self.description = self.create_publisher(String, "robot_description", messages.LATCHED)
+        self.model_pub = self.create_publisher(String, "panel_deploy/model", messages.LATCHED)
         runtime.trigger_service(self, "~/reload", self._reload)
         self.scene, self.model, text = load_array(**runtime.values(self, PARAMETERS))
         self._publish(text)

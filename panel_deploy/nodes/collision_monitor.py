@@ -29,26 +29,26 @@ PARAMETERS = {
     "tolerance": (-1.0, "interference depth that counts as a collision, m; negative: the scene's"),
     "refine": (True, "also check between samples (Hermite motion), so no collision is missed"),
 }
-STATUS = "panel_deploy/collision_monitor"
 
 
 class CollisionMonitorNode(Node):
     def __init__(self, **kwargs):
         super().__init__("collision_monitor", **kwargs)
-        runtime.declare(self, PARAMETERS)
-        runtime.validator(self, lambda changes: self._collision(changes))
-        self.add_post_set_parameters_callback(self._apply)
-        self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", messages.EVENTS)
-        self.events = self.create_publisher(DiagnosticArray, "/panel_deploy/collision_events",
-                                            messages.EVENTS)
-        self.markers = self.create_publisher(MarkerArray, "/panel_deploy/collision_markers",
-                                             messages.EVENTS)
-        self.create_subscription(String, "/panel_deploy/model", self._on_model, messages.LATCHED)
-        self.create_subscription(JointState, "/joint_states", self._on_joint_state, messages.STREAM)
-        runtime.trigger_service(self, "~/reset", self._reset)
-        self.create_timer(0.5, self._publish_verdict)
         self.scene = None
         self.stream = None  # StreamCheck of the current model
+        #: Name of every status this node sends, so that arrays in namespaces tell theirs apart.
+        self.status_name = self.get_fully_qualified_name()
+        runtime.declare(self, PARAMETERS, self._collision)
+        self.add_post_set_parameters_callback(self._apply)
+        self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", messages.EVENTS)
+        self.events = self.create_publisher(DiagnosticArray, "panel_deploy/collision_events",
+                                            messages.EVENTS)
+        self.markers = self.create_publisher(MarkerArray, "panel_deploy/collision_markers",
+                                             messages.EVENTS)
+        self.create_subscription(String, "panel_deploy/model", self._on_model, messages.LATCHED)
+        self.create_subscription(JointState, "joint_states", self._on_joint_state, messages.STREAM)
+        runtime.trigger_service(self, "~/reset", self._reset)
+        self.create_timer(0.5, self._publish_verdict)
 
     def _collision(self, changes=None) -> CollisionSettings:
         p = {**runtime.values(self, PARAMETERS), **(changes or {})}
@@ -69,6 +69,8 @@ class CollisionMonitorNode(Node):
             self.stream = StreamCheck(build_model(self.scene), self._collision())
         except PanelDeployError as e:
             self._warn(f"ignored a model: {e}")
+            return
+        self._publish_verdict()  # at once: clients learn that the model has reached the monitor
 
     def _on_joint_state(self, msg):
         if self.stream is None:
@@ -81,27 +83,32 @@ class CollisionMonitorNode(Node):
         if found:
             R, p = forward_kinematics(self.stream.model, theta)
             self.events.publish(messages.diagnostics(
-                t, *(messages.event_status(e) for e in found)))
+                t, *(messages.event_status(self.status_name, e) for e in found)))
             self.markers.publish(messages.collision_markers(self.stream.model, found[0], R, p))
             self._publish_verdict()
 
     def _warn(self, text):
         self.get_logger().warning(text)
         self.diagnostics.publish(messages.diagnostics(
-            self.get_clock().now().nanoseconds * 1e-9, messages.status(STATUS, messages.WARN, text)))
+            self.get_clock().now().nanoseconds * 1e-9, messages.status(self.status_name, messages.WARN, text)))
 
     def _publish_verdict(self):
         if self.stream is None:
             return
         level, text, values = self.stream.verdict()
         self.diagnostics.publish(messages.diagnostics(
-            values.get("t") or 0.0, messages.status(STATUS, level, text, values)))
+            values.get("t") or 0.0, messages.status(self.status_name, level, text, values)))
+
+    def _clear_markers(self):
+        """Take the last deployment's collision markers off displays."""
+        self.markers.publish(messages.clear_markers())
 
     def _reset(self, request, response):
         if self.stream is None:
             response.success, response.message = False, "no model yet"
             return response
         self.stream.reset()
+        self._clear_markers()
         response.success, response.message = True, "the next joint state starts a new deployment"
         return response
 

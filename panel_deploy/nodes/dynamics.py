@@ -1,14 +1,17 @@
 """``dynamics`` node: deploys the array from the stowed state and streams it.
 
 ``~/deploy`` answers at once and starts a deployment of the model last
-received on ``/panel_deploy/model`` with the current parameters; samples go
-out on ``/joint_states`` and ``/clock`` as they are computed, ``rate_hz`` per
+received on ``panel_deploy/model`` with the current parameters; samples go
+out on ``joint_states`` and ``/clock`` as they are computed, ``rate_hz`` per
 simulated second, paced by ``real_time_factor``, stamped with simulated
-time; ``/panel_deploy/panels`` follows at a display rate. The outcome ends on ``/diagnostics``.
+time; ``panel_deploy/panels`` follows at a display rate. The outcome ends on
+``/diagnostics`` (its summary, as ``panel-deploy simulate --json`` prints it,
+included), or an ERROR saying why the deployment failed; the node deploys again.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from dataclasses import fields
@@ -34,9 +37,12 @@ _DOC = {
     "rate_hz": "samples published per simulated second",
     "real_time_factor": "simulated seconds per wall second; 0: as fast as computed",
 }
+#: Ranges ``ros2 param describe`` shows; the rest of each check is DynamicsParameters'.
+_RANGE = {"rtol": (0.0, 1.0), "t_end": (0.0, 600.0), "rate_hz": (0.0, 1e6),
+          "real_time_factor": (0.0, math.inf)}
 PARAMETERS = {f.name: (Parameter.Type.DOUBLE_ARRAY if f.name == "stiffness" else f.default,
-                       _DOC[f.name]) for f in fields(DynamicsParameters)}
-STATUS = "panel_deploy/dynamics"
+                       _DOC[f.name], *([_RANGE[f.name]] if f.name in _RANGE else []))
+              for f in fields(DynamicsParameters)}
 #: /panel_deploy/panels per wall second at most (and always the last sample).
 PANEL_RATE = 30.0
 
@@ -44,16 +50,14 @@ PANEL_RATE = 30.0
 class DynamicsNode(runtime.WorkerNode):
     def __init__(self, **kwargs):
         super().__init__("dynamics", **kwargs)
-        runtime.declare(self, PARAMETERS)
-        runtime.validator(self, self._check)
-        self.joint_states = self.create_publisher(JointState, "/joint_states", messages.STREAM)
-        self.panels = self.create_publisher(MarkerArray, "/panel_deploy/panels", messages.EVENTS)
+        runtime.declare(self, PARAMETERS, self._check)
+        self.joint_states = self.create_publisher(JointState, "joint_states", messages.STREAM)
+        self.panels = self.create_publisher(MarkerArray, "panel_deploy/panels", messages.EVENTS)
         self.clock = self.create_publisher(Clock, "/clock", messages.STREAM)
         self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", messages.EVENTS)
         runtime.trigger_service(self, "~/deploy", self._deploy)
         runtime.trigger_service(self, "~/stop", self._stop)
         self.deployment = None  # the current or last Deployment
-        self.summary = None     # deployment_summary of the last finished run
 
     def parameters(self, changes=None) -> DynamicsParameters:
         current = runtime.values(self, PARAMETERS)
@@ -76,7 +80,7 @@ class DynamicsNode(runtime.WorkerNode):
             response.success, response.message = False, str(e)
             return response
         self.deployment = Deployment(model, scene.simulation)
-        self.start_job(self._run, self.deployment, scene, params)
+        self.start_job("the deployment", self.diagnostics, self._run, self.deployment, scene, params)
         response.success = True
         response.message = (f"deploying {scene.name or scene.source} to {scene.simulation.t_end:g} s "
                             f"({scene.simulation.samples} samples)")
@@ -103,16 +107,17 @@ class DynamicsNode(runtime.WorkerNode):
                 shown = now
         published = time.monotonic() - start
         result = deployment.result
-        self.summary = deployment_summary(model, result, flat_tolerance=scene.simulation.flat_tolerance)
-        s = self.summary
+        s = deployment_summary(model, result, flat_tolerance=scene.simulation.flat_tolerance)
         level = messages.OK if result.success and s["time_to_flat"] is not None else (
             messages.WARN if result.success else messages.ERROR)
         values = {k: s[k] for k in ("success", "status", "message", "time_to_flat", "t_end",
                                     "energy_balance_error", "max_constraint_gap", "wall_time",
                                     "nsteps")}
         values["publish_wall_time"] = published  # s from the first block to the last message
-        self.diagnostics.publish(messages.diagnostics(
-            float(result.t[-1]), messages.status(STATUS, level, s["message"], values)))
+        values["samples"] = len(result.t)  # so a client knows when a monitor has checked them all
+        values["summary"] = json.dumps(s)  # as panel-deploy simulate --json prints it
+        self.diagnostics.publish(messages.diagnostics(float(result.t[-1]), messages.status(
+            self.get_fully_qualified_name(), level, s["message"], values)))
 
     def _stop(self, request, response):
         if not self.running:

@@ -1,5 +1,6 @@
 """``panel-deploy run``: the four nodes in one process on one executor, driven
-through their own services and topics like any ROS client would.
+through their topics and services only, like any ROS client (the driver
+would drive the same nodes in processes of their own).
 
 Real rclpy: ``ros2 topic echo /joint_states`` from another shell sees them.
 """
@@ -14,15 +15,20 @@ import time
 from pathlib import Path
 
 import rclpy
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.validate_namespace import validate_namespace
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
 
+from ..errors import SceneError
 from ..live import scene_yaml
 from ..record.deployment import outcome_record
-from ..summary import deployment_summary, deployment_text
+from ..summary import deployment_text
 from . import messages, runtime
 from .array_model import ArrayModelNode
 from .collision_monitor import CollisionMonitorNode
@@ -30,163 +36,247 @@ from .dynamics import DynamicsNode
 from .optimiser import OptimiserNode
 from .recorder import RecorderNode
 
-#: Seconds to wait for a service or for the model to reach every node.
+#: Seconds to wait for a service, for the model to reach every node, or for
+#: the monitor to catch up.
 TIMEOUT = 30.0
 
 
 class Driver(Node):
-    """The client side of ``run``: calls the services, shows progress on stderr."""
+    """The client side of ``run``: calls the services, follows the topics,
+    shows progress on stderr and builds the summary from what they carry."""
 
-    def __init__(self, graph, stop, recorder=None):
-        super().__init__("panel_deploy_run")
-        self.graph, self.stop, self.recorder = graph, stop, recorder
+    def __init__(self, interrupt, recorder=None, **kwargs):
+        super().__init__("panel_deploy_run", **kwargs)
+        self.interrupt, self.recorder = interrupt, recorder
         self.group = ReentrantCallbackGroup()
-        self.create_subscription(DiagnosticArray, "/panel_deploy/collision_events",
-                                 self._on_events, messages.EVENTS, callback_group=self.group)
-        self.create_subscription(DiagnosticArray, "/optimiser/progress", self._on_progress,
-                                 messages.EVENTS, callback_group=self.group)
+        # The nodes are this node's neighbours: their names resolve in its namespace.
+        self.dynamics, self.monitor = (self.resolve_topic_name(n)
+                                       for n in ("dynamics", "collision_monitor"))
+        self._triggers = {}
+        self.outcome = None   # values of the dynamics node's outcome status
+        self.verdict = None   # values of the monitor's last verdict
+        self.events = []      # values of this deployment's collision events
+        self.result = None    # the optimiser's result (parsed YAML)
+        self.search_failed = None
+        self.deploying = False
+        self.shown = -1.0
         self.exit_code = 1
         self.summary = None
+        for msg_type, topic, callback, qos in (
+                (DiagnosticArray, "/diagnostics", self._on_diagnostics, messages.EVENTS),
+                (DiagnosticArray, "panel_deploy/collision_events", self._on_events, messages.EVENTS),
+                (DiagnosticArray, "optimiser/progress", self._on_progress, messages.EVENTS),
+                (String, "optimiser/result", self._on_result, messages.LATCHED),
+                (MarkerArray, "panel_deploy/panels", self._on_panels, messages.EVENTS)):
+            self.create_subscription(msg_type, topic, callback, qos, callback_group=self.group)
 
-    def call(self, service: str) -> str:
-        client = self.create_client(Trigger, service, callback_group=self.group)
+    def call(self, service: str, retry: str = "no model yet") -> str:
+        """Call a Trigger ``service``; again while it refuses with ``retry`` (up to TIMEOUT)."""
+        if service not in self._triggers:
+            self._triggers[service] = self.create_client(Trigger, service, callback_group=self.group)
+        client = self._triggers[service]
         if not client.wait_for_service(timeout_sec=TIMEOUT):
             raise RuntimeError(f"{service}: no such service")
-        done = threading.Event()
-        future = client.call_async(Trigger.Request())
-        future.add_done_callback(lambda _: done.set())
-        if not done.wait(TIMEOUT):
-            raise RuntimeError(f"{service}: no answer")
-        reply = future.result()
-        if not reply.success:
-            raise RuntimeError(f"{service}: {reply.message}")
-        return reply.message
+        end = time.monotonic() + TIMEOUT
+        while True:
+            done = threading.Event()
+            future = client.call_async(Trigger.Request())
+            future.add_done_callback(lambda _: done.set())
+            if not done.wait(TIMEOUT):
+                raise RuntimeError(f"{service}: no answer")
+            reply = future.result()
+            if reply.success:
+                return reply.message
+            if retry not in reply.message or time.monotonic() > end:
+                raise RuntimeError(f"{service}: {reply.message}")
+            time.sleep(0.05)
+
+    def _on_diagnostics(self, msg):
+        for s in msg.status:
+            if s.name == self.dynamics:
+                self.outcome = {"level": s.level, "message": s.message, **messages.values(s)}
+            elif s.name == self.monitor:
+                self.verdict = messages.values(s)
 
     def _on_events(self, msg):
         for s in msg.status:
+            self.events.append(messages.values(s))
             print(f"  collision: {s.message}", file=sys.stderr, flush=True)
 
     def _on_progress(self, msg):
         for s in msg.status:
-            v = {kv.key: kv.value for kv in s.values}
+            if s.level == messages.ERROR:
+                self.search_failed = s.message
+                continue
+            v = messages.values(s)
             print(f"  optimise {s.message:>8}: {v.get('evaluations')} evaluations, best f "
                   f"{float(v.get('best_f', 'nan')):+.5f}, feasible {v.get('feasible')}, "
                   f"{float(v.get('elapsed', 0)):.1f} s", file=sys.stderr, flush=True)
 
-    def _wait(self, condition, what, timeout=TIMEOUT) -> None:
+    def _on_result(self, msg):
+        self.result = yaml.safe_load(msg.data)
+
+    def _on_panels(self, msg):
+        """A line every 0.1 s of simulated time (the panels come at a display rate)."""
+        if not msg.markers:
+            return
+        t = messages.seconds(msg.markers[0].header.stamp)
+        if t - self.shown < 0.1:
+            return
+        self.shown = t
+        d = _number((self.verdict or {}).get("d", ""))
+        print(f"  t = {t:6.3f} s  smallest distance d = "
+              f"{'-' if d is None else f'{d * 1e3:.2f} mm'}  "
+              f"collisions {len(self.events)}", file=sys.stderr, flush=True)
+
+    def _wait(self, condition, what, timeout=TIMEOUT, interruptible=True) -> bool:
+        """Until ``condition()``; KeyboardInterrupt on an interrupt (if
+        ``interruptible``), RuntimeError after ``timeout`` s (else False)."""
         end = time.monotonic() + timeout
         while not condition():
-            if self.stop.is_set():
+            if interruptible and self.interrupt.is_set():
                 raise KeyboardInterrupt
             if time.monotonic() > end:
-                raise RuntimeError(f"timed out waiting for {what}")
+                if interruptible:
+                    raise RuntimeError(f"timed out waiting for {what}")
+                return False
             time.sleep(0.02)
+        return True
 
     def drive(self, optimise: bool) -> None:
-        model_node, dynamics, monitor, optimiser = self.graph
-        self._wait(lambda: dynamics.scene is not None and monitor.stream is not None
-                   and optimiser.scene is not None, "the model on /panel_deploy/model")
+        # The monitor says it has the model with its first verdict; the
+        # dynamics node and the optimiser refuse requests until theirs came.
+        self._wait(lambda: self.verdict is not None, "the model to reach the collision monitor")
         if optimise:
-            print(self.call("/optimiser/optimise"), file=sys.stderr, flush=True)
-            self._wait(lambda: not optimiser.running, "the optimiser", timeout=1e9)
-            if optimiser.result is None or not optimiser.result.success:
-                what = optimiser.result.message if optimiser.result else "the search failed"
+            print(self.call("optimiser/optimise"), file=sys.stderr, flush=True)
+            # The result is published once the optimiser has set its K on the dynamics node.
+            self._wait(lambda: self.result is not None or self.search_failed, "the optimiser",
+                       timeout=1e9)
+            if self.result is None or not self.result["success"]:
+                what = self.result["message"] if self.result else self.search_failed
                 print(f"optimise: {what}; deploying with the scene's stiffness",
                       file=sys.stderr, flush=True)
-        print(self.call("/dynamics/deploy"), file=sys.stderr, flush=True)
-        shown = -1.0
-        while dynamics.running:
-            shown = self._show_progress(dynamics, monitor, shown)
-            time.sleep(0.1)
-        published = len(dynamics.deployment.result.t)
-        self._wait(lambda: monitor.stream.check is not None
-                   and monitor.stream.check.checked >= published, "the collision monitor")
+        self.events.clear()
+        self.deploying = True
+        print(self.call("dynamics/deploy"), file=sys.stderr, flush=True)
+        self._wait(lambda: self.outcome is not None, "the deployment", timeout=1e9)
+        self._finish()
+
+    def stop_deployment(self) -> None:
+        """After an interrupt: stop a running deployment and summarise what was computed."""
+        if not self.deploying:
+            return
+        try:
+            self.call("dynamics/stop", retry="")
+        except RuntimeError:
+            pass  # none running: it has just ended
+        try:
+            if self._wait(lambda: self.outcome is not None, "", TIMEOUT, interruptible=False):
+                self._finish(interruptible=False)
+        except RuntimeError as e:  # interrupted anyway: say why there is no summary
+            print(f"panel-deploy: {e}", file=sys.stderr)
+
+    def _finish(self, interruptible=True) -> None:
+        if "summary" not in self.outcome:  # the deployment failed (an ERROR status)
+            raise RuntimeError(self.outcome["message"])
+        published = int(self.outcome["samples"])
+        self._wait(lambda: int((self.verdict or {}).get("samples") or 0) >= published,
+                   "the collision monitor", interruptible=interruptible)
         self.summarise()
         if self.recorder is not None:
             got = self.recorder.received
             self._wait(lambda: got["/joint_states"] >= published and got["/diagnostics"] >= 1,
-                       "the recorder")
+                       "the recorder", interruptible=interruptible)
             time.sleep(0.2)  # the monitor's last events and verdict, published just now
-            self.recorder.close(outcome_record(self.summary, monitor.stream.check.report()))
+            self.recorder.close(outcome_record(self.summary))
 
     def summarise(self) -> None:
-        """The summary of what the deployment and the monitor have computed so far."""
-        _, dynamics, monitor, _ = self.graph
-        deployment = dynamics.deployment
-        if deployment is None or deployment.result is None:
-            return
-        check = monitor.stream.check if monitor.stream is not None else None
-        report = check.report() if check is not None else None
-        s = deployment_summary(deployment.model, deployment.result, report,
-                               flat_tolerance=deployment.settings.flat_tolerance)
-        first = report.first_collision if report is not None else None
+        """The deployment's summary (the outcome's) with the monitor's verdict
+        and events as its collision part; sets the exit code."""
+        s = json.loads(self.outcome["summary"])
+        v = self.verdict
+        pair = v.get("first_collision_pair")
+        first = None if not pair else {"t": float(v["first_collision_t"]), "pair": pair.split(","),
+                                       "v": float(v["approach_speed"])}
+        s["collision"] = {
+            "collided": first is not None, "first_collision": first,
+            "colliding_pairs": [{"pair": e["pair"].split(","), "t": float(e["t"]),
+                                 "approach_speed": float(e["approach_speed"]),
+                                 "distance": float(e["distance"])} for e in self.events],
+            "v": first["v"] if first else 0.0, "d": _number(v.get("d", "")),
+            "d_time": _number(v.get("d_time", "")),
+            "d_pair": v["d_pair"].split(",") if v.get("d_pair") else None,
+            "samples_checked": int(v["samples"])}
         flat = s["time_to_flat"]
-        collided_before_flat = first is not None and (flat is None or first.t <= flat)
+        collided_before_flat = first is not None and (flat is None or first["t"] <= flat)
         self.exit_code = 0 if s["success"] and flat is not None and not collided_before_flat else 1
         self.summary = s
 
-    @staticmethod
-    def _show_progress(dynamics, monitor, shown) -> float:
-        """A line every 0.1 s of simulated time; returns the time last shown."""
-        stream = monitor.stream
-        if stream is None or stream.check is None or not dynamics.deployment.blocks:
-            return shown
-        t = float(dynamics.deployment.blocks[-1].t[-1])
-        if t - shown < 0.1:
-            return shown
-        d = stream.check.d
-        print(f"  t = {t:6.3f} s  smallest distance d = "
-              f"{'-' if d == float('inf') else f'{d * 1e3:.2f} mm'}  "
-              f"collisions {len(stream.check.monitor.events)}", file=sys.stderr, flush=True)
-        return t
+
+def _number(text: str):
+    return None if text in ("", "None") else float(text)
 
 
 def run_graph(scene, *, optimise: bool = False, real_time_factor: float = 1.0,
-              rate_hz: float = 200.0, as_json: bool = False, record=None) -> int:
+              rate_hz: float = 200.0, as_json: bool = False, record=None,
+              namespace: str = "") -> int:
     """Start the graph on ``scene`` (a validated Scene, overrides included),
     optimise (optionally), deploy, print the summary; return the exit code.
 
     With ``record`` (a path), the graph's topics go to that MCAP file
-    (:mod:`.recorder`).
+    (:mod:`.recorder`). ``namespace`` puts every node under it.
 
     0 when the deployment reaches flat without a collision before it, 1
     otherwise, 130 when interrupted (the summary of what was computed is
     still printed).
+
+    Raises
+    ------
+    SceneError
+        ``namespace`` is not a valid ROS namespace.
     """
+    namespace = "/" + namespace.strip("/") if namespace.strip("/") else ""
+    try:
+        validate_namespace(namespace or "/")
+    except Exception as e:  # rclpy's message is three lines with a caret
+        reason = str(e).splitlines()[0].removeprefix("Invalid namespace: ").rstrip(":")
+        raise SceneError("--namespace", f"{reason}, got {namespace!r}") from None
     with tempfile.TemporaryDirectory(prefix="panel_deploy_run_") as folder:
         # The array_model node reads a scene file: this one has the overrides applied.
         path = Path(folder) / f"{scene.name or 'scene'}.yaml"
         path.write_text(scene_yaml(scene))
-        return _run(str(path), optimise, real_time_factor, rate_hz, as_json, record)
+        return _run(str(path), optimise, real_time_factor, rate_hz, as_json, record, namespace)
 
 
-def _run(scene_file, optimise, real_time_factor, rate_hz, as_json, record) -> int:
-    stop = runtime.start([])
+def _run(scene_file, optimise, real_time_factor, rate_hz, as_json, record, namespace) -> int:
+    interrupt = runtime.start([])
+    done = threading.Event()  # the executor spins until the driver is done
     try:
-        recorder = RecorderNode(record) if record else None
-        graph = (ArrayModelNode(parameter_overrides=[Parameter("scene", value=scene_file)]),
+        ns = {"namespace": namespace}
+        recorder = RecorderNode(record, **ns) if record else None
+        graph = (ArrayModelNode(parameter_overrides=[Parameter("scene", value=scene_file)], **ns),
                  DynamicsNode(parameter_overrides=[
                      Parameter("real_time_factor", value=float(real_time_factor)),
-                     Parameter("rate_hz", value=float(rate_hz))]),
-                 CollisionMonitorNode(), OptimiserNode())
-        driver = Driver(graph, stop, recorder)
+                     Parameter("rate_hz", value=float(rate_hz))], **ns),
+                 CollisionMonitorNode(**ns), OptimiserNode(**ns))
+        driver = Driver(interrupt, recorder, **ns)
         failure = []
+        interrupted = threading.Event()
 
         def drive():
             try:
                 driver.drive(optimise)
             except KeyboardInterrupt:
-                driver.summarise()
                 interrupted.set()
-            except RuntimeError as e:
-                failure.append(str(e))
+                driver.stop_deployment()
+            except Exception as e:  # a RuntimeError says why; anything else is a bug, in one line too
+                failure.append(str(e) if isinstance(e, RuntimeError) else f"{type(e).__name__}: {e}")
             finally:
-                stop.set()
+                done.set()
 
-        interrupted = threading.Event()
         worker = threading.Thread(target=drive, daemon=True)
         worker.start()
-        runtime.spin([*graph, driver] + ([recorder] if recorder else []), stop)
+        runtime.spin([*graph, driver] + ([recorder] if recorder else []), done)
         worker.join(timeout=10.0)
     finally:
         rclpy.try_shutdown()

@@ -21,7 +21,7 @@ from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..errors import TrajectoryError
-from ..record.messages import EVENT_STATUS, PANEL_COLOUR, event_fields, status_value
+from ..record.messages import PANEL_COLOUR, event_fields, status_value
 
 #: Latched topics (/robot_description, /panel_deploy/model, results): a late
 #: subscriber still gets the last message.
@@ -166,6 +166,14 @@ def collision_markers(model, event, rotation, position) -> MarkerArray:
     return MarkerArray(markers=boxes + [point])
 
 
+def clear_markers() -> MarkerArray:
+    """DELETEALL: every marker of the topic's publisher off the display."""
+    m = Marker()
+    m.header.frame_id = FRAME
+    m.action = Marker.DELETEALL
+    return MarkerArray(markers=[m])
+
+
 def status(name: str, level: int, message: str, values: dict | None = None,
            hardware_id: str = "panel_array") -> DiagnosticStatus:
     """A DiagnosticStatus; ``level`` OK, WARN, ERROR or 0, 1, 2; ``values``
@@ -176,12 +184,18 @@ def status(name: str, level: int, message: str, values: dict | None = None,
                                     for k, v in (values or {}).items()])
 
 
+def values(status: DiagnosticStatus) -> dict:
+    """A status's key-values as ``{key: text}``."""
+    return {kv.key: kv.value for kv in status.values}
+
+
 def diagnostics(t: float, *statuses) -> DiagnosticArray:
     msg = DiagnosticArray(status=list(statuses))
     msg.header.stamp = stamp(t)
     return msg
 
 
-def event_status(event) -> DiagnosticStatus:
-    """One collision event's status, as recordings carry it (``event_fields``)."""
-    return status(EVENT_STATUS, ERROR, *event_fields(event))
+def event_status(name: str, event) -> DiagnosticStatus:
+    """One collision event's status named ``name``/event (the monitor's full
+    name), with the fields recordings carry (``event_fields``)."""
+    return status(f"{name}/event", ERROR, *event_fields(event))

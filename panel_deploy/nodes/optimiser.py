@@ -1,10 +1,12 @@
 """``optimiser`` node: the stiffness optimisation of Eq. (8) as a service.
 
 ``~/optimise`` answers at once and searches in the background on the model
-last received; progress goes to ``~/progress``, the result (YAML, as
-``panel-deploy optimise`` writes it) to ``~/result``, and a feasible K is set
-on the ``target_node``'s ``stiffness`` (and ``damping_ratio`` when searched)
-through its ``set_parameters`` service. ``~/cancel`` stops with the best K so far.
+last received; progress goes to ``~/progress``, a feasible K is set on the
+``target_node``'s ``stiffness`` (and ``damping_ratio`` when searched) through
+its ``set_parameters`` service (a relative name is in this node's namespace),
+then the result (YAML, as ``panel-deploy optimise`` writes it) goes to
+``~/result``. A failed search ends as an ERROR on ``~/progress``. ``~/cancel``
+stops with the best K so far.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
 from ..build import build_model
-from ..errors import PanelDeployError
+from ..errors import PanelDeployError, SceneError
 from ..live import optimisation_scene
 from ..optimise import optimise
 from ..optimise.io import dump_result, result_to_dict
@@ -26,31 +28,47 @@ from ..optimise.parallel import Cancelled
 from . import messages, runtime
 
 PARAMETERS = {
-    "max_evaluations": (0, "simulation budget; 0: the scene's optimisation.max_evaluations"),
+    "max_evaluations": (0, "simulation budget; 0: the scene's optimisation.max_evaluations",
+                        (0, 1_000_000)),
     "method": ("", "local or global; empty: the scene's"),
-    "workers": (1, "parallel evaluations in local processes (0: all cores, 1: in this process)"),
+    "workers": (1, "parallel evaluations in local processes (0: all cores, 1: in this process)",
+                (0, 1024)),
     "dask_address": ("", "run the evaluations on this Dask scheduler; empty: locally"),
     "damping_ratio_bounds": (Parameter.Type.DOUBLE_ARRAY,
                              "[lower, upper] c/k, s, to search c/k too; unset or empty: the scene's"),
-    "seed": (-1, "random seed; negative: the scene's"),
-    "target_node": ("dynamics", "node whose stiffness (and damping_ratio) a feasible result sets"),
+    "seed": (-1, "random seed; -1: the scene's", (-1, 2**32 - 1)),
+    "target_node": ("dynamics", "node whose stiffness (and damping_ratio) a feasible result sets; "
+                                "a relative name is in this node's namespace"),
 }
-STATUS = "panel_deploy/optimiser"
 
 
 class OptimiserNode(runtime.WorkerNode):
     def __init__(self, **kwargs):
         super().__init__("optimiser", **kwargs)
-        runtime.declare(self, PARAMETERS)
-        runtime.validator(self, lambda changes: self.scene and self._search_scene(changes))
+        runtime.declare(self, PARAMETERS, self._check)
         self.progress = self.create_publisher(DiagnosticArray, "~/progress", messages.EVENTS)
         self.result_pub = self.create_publisher(String, "~/result", messages.LATCHED)
         runtime.trigger_service(self, "~/optimise", self._optimise)
         runtime.trigger_service(self, "~/cancel", self._cancel)
         self._client_group = MutuallyExclusiveCallbackGroup()
         self._targets = {}  # set_parameters clients by service name
-        self.result = None  # the last OptimisationResult
         self._cancel_event = threading.Event()
+
+    def _check(self, changes):
+        self._target_service(changes.get("target_node", self.get_parameter("target_node").value))
+        if self.scene is not None:
+            self._search_scene(changes)
+
+    def _target_service(self, target: str) -> str:
+        """The ``set_parameters`` service of ``target``, resolved in this node's namespace."""
+        # Empty would resolve to /set_parameters, ~ to this node's own.
+        if target and not target.endswith("/") and not target.startswith("~"):
+            try:
+                return self.resolve_service_name(f"{target}/set_parameters")
+            except RuntimeError:  # rclpy's RCLError: a character or token a name cannot have
+                pass
+        raise SceneError("target_node", f"expected a node name such as dynamics or "
+                                        f"/array1/dynamics, got {target!r}")
 
     def _search_scene(self, changes=None):
         p = {**runtime.values(self, PARAMETERS), **(changes or {})}
@@ -68,7 +86,7 @@ class OptimiserNode(runtime.WorkerNode):
             response.success, response.message = False, str(e)
             return response
         self._cancel_event.clear()
-        self.start_job(self._run, model, scene, p)
+        self.start_job("the optimisation", self.progress, self._run, model, scene, p)
         response.success = True
         response.message = f"optimising {scene.name or scene.source} ({scene.optimisation.method}, " \
                            f"at most {scene.optimisation.max_evaluations} evaluations)"
@@ -76,7 +94,7 @@ class OptimiserNode(runtime.WorkerNode):
 
     def _report(self, progress):
         self.progress.publish(messages.diagnostics(progress.elapsed, messages.status(
-            STATUS, messages.OK, progress.phase,
+            self.get_fully_qualified_name(), messages.OK, progress.phase,
             {"evaluations": progress.nfev, "best_f": progress.best_f,
              "feasible": not progress.collision and progress.reached_flat,
              "elapsed": progress.elapsed})))
@@ -89,23 +107,18 @@ class OptimiserNode(runtime.WorkerNode):
         except Cancelled:
             self.get_logger().info("cancelled before the first evaluation: no result")
             return
-        except Exception as e:  # a failed search must not end the node
-            self.get_logger().error(f"optimisation failed: {e}")
-            self.progress.publish(messages.diagnostics(0.0, messages.status(
-                STATUS, messages.ERROR, f"optimisation failed: {e}")))
-            return
-        self.result = result
-        self.result_pub.publish(messages.string(dump_result(result, scene.name)))
         self.get_logger().info(result.message)
         if result_to_dict(result)["success"]:  # false too if a value came out non-finite
             self._set_target(p["target_node"], result)
+        # Last: a client that has the result knows the target has its K.
+        self.result_pub.publish(messages.string(dump_result(result, scene.name)))
 
     def _set_target(self, target, result):
         values = [Parameter("stiffness", Parameter.Type.DOUBLE_ARRAY, [float(k) for k in result.k])]
         if result.problem.damping_variable:
             values.append(Parameter("damping_ratio", Parameter.Type.DOUBLE,
                                     float(result.c[0] / result.k[0])))
-        service = f"/{target.lstrip('/')}/set_parameters"
+        service = self._target_service(target)
         if service not in self._targets:  # kept: destroying a client under a spinning executor blocks
             self._targets[service] = self.create_client(SetParameters, service,
                                                         callback_group=self._client_group)

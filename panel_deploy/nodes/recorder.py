@@ -28,16 +28,23 @@ from ..record import messages as recorded
 from ..record.writer import Recorder, run_metadata
 from . import messages
 
-#: Topic -> (rclpy type, QoS) of what the graph publishes and the recorder keeps.
+#: Topic subscribed -> (rclpy type, QoS) of what the graph publishes and the
+#: recorder keeps. Relative as the nodes' own, so that a recorder in a
+#: namespace records its array's; the file names each topic absolute without
+#: the namespace (:func:`recorded_name`), as its readers expect.
 TOPICS = {
-    "/robot_description": (String, messages.LATCHED),
-    "/panel_deploy/model": (String, messages.LATCHED),
-    "/joint_states": (JointState, messages.STREAM),
-    "/panel_deploy/panels": (MarkerArray, messages.EVENTS),
+    "robot_description": (String, messages.LATCHED),
+    "panel_deploy/model": (String, messages.LATCHED),
+    "joint_states": (JointState, messages.STREAM),
+    "panel_deploy/panels": (MarkerArray, messages.EVENTS),
     "/diagnostics": (DiagnosticArray, messages.EVENTS),
-    "/panel_deploy/collision_events": (DiagnosticArray, messages.EVENTS),
+    "panel_deploy/collision_events": (DiagnosticArray, messages.EVENTS),
     "/clock": (Clock, messages.STREAM),
 }
+
+
+def recorded_name(topic: str) -> str:
+    return "/" + topic.lstrip("/")
 
 
 class RecorderNode(Node):
@@ -49,9 +56,10 @@ class RecorderNode(Node):
             self.recorder.channel(topic, typename)
         self.model = None
         self.now = 0  # ns of simulated time
-        self.received = dict.fromkeys(TOPICS, 0)
+        self.received = {recorded_name(topic): 0 for topic in TOPICS}
         for topic, (msg_type, qos) in TOPICS.items():
-            self.create_subscription(msg_type, topic, self._writer(topic), qos, raw=True)
+            self.create_subscription(msg_type, topic, self._writer(recorded_name(topic)), qos,
+                                     raw=True)
 
     def _writer(self, topic):
         typename = recorded.TOPICS[topic][0]

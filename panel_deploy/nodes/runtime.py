@@ -14,7 +14,8 @@ import sys
 import threading
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType, SetParametersResult)
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -23,20 +24,80 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from ..errors import PanelDeployError
+from ..errors import PanelDeployError, SceneError
 from ..live import scene_from_yaml
 from . import messages
 
-#: ROS parameter type of each Python default.
-_TYPES = {bool: Parameter.Type.BOOL, int: Parameter.Type.INTEGER,
-          float: Parameter.Type.DOUBLE, str: Parameter.Type.STRING}
+def declare(node, parameters: dict, check=None) -> None:
+    """Declare ``{name: (default, description[, (low, high)])}``, then set the
+    values given at start (command line, params file, overrides) through the
+    checks of a later set: type, range, then ``check`` (see :func:`_validator`).
+
+    A default given as a ``Parameter.Type`` declares an array without a
+    value (read as empty). ``(low, high)`` becomes the descriptor's range, so
+    ``ros2 param describe`` shows it. An integer (array) given for a double
+    (array) is taken as doubles, at start and on set: ``-p rate_hz:=500`` and
+    ``ros2 param set`` send integers for whole numbers.
+
+    Raises
+    ------
+    SceneError
+        A value given at start that a set would refuse, naming the parameter.
+    """
+    given = []
+    for name, (default, description, *bounds) in parameters.items():
+        # Declared once untyped to read the start value whatever its type,
+        # which a typed declaration would refuse with a traceback.
+        value = node.declare_parameter(name, None, ParameterDescriptor(dynamic_typing=True)).value
+        node.undeclare_parameter(name)
+        node.declare_parameter(name, default, _descriptor(default, description, *bounds),
+                               ignore_override=True)
+        if value is not None:
+            given.append(Parameter(name, value=value))
+    node.add_pre_set_parameters_callback(lambda params: [_coerced(node, p) for p in params])
+    if check is not None:
+        _validator(node, check)
+    given = [_coerced(node, p) for p in given]
+    for p in given:  # rclpy's reason for a wrong type does not name the parameter
+        expected = node.describe_parameter(p.name).type
+        if p.type_.value != expected:
+            raise SceneError(p.name, f"expected {_TYPE_NAMES[expected]}, got {p.value!r}")
+    if given:
+        result = node.set_parameters_atomically(given)
+        if not result.successful:
+            raise SceneError("", result.reason)
 
 
-def declare(node, parameters: dict) -> None:
-    """Declare ``{name: (default, description)}``; a default given as a
-    ``Parameter.Type`` declares an array without a value (read as empty)."""
-    for name, (default, description) in parameters.items():
-        node.declare_parameter(name, default, ParameterDescriptor(description=description))
+_TYPE_NAMES = {ParameterType.PARAMETER_BOOL: "true or false",
+               ParameterType.PARAMETER_INTEGER: "an integer",
+               ParameterType.PARAMETER_DOUBLE: "a number",
+               ParameterType.PARAMETER_STRING: "a string",
+               ParameterType.PARAMETER_DOUBLE_ARRAY: "a list of numbers"}
+
+
+def _descriptor(default, description, bounds=None) -> ParameterDescriptor:
+    descriptor = ParameterDescriptor(description=description)
+    if bounds is not None:
+        low, high = bounds
+        if isinstance(default, float):
+            descriptor.floating_point_range = [FloatingPointRange(
+                from_value=float(low), to_value=float(high), step=0.0)]
+        else:
+            descriptor.integer_range = [IntegerRange(from_value=low, to_value=high, step=1)]
+    return descriptor
+
+
+def _coerced(node, p: Parameter) -> Parameter:
+    """``p`` with integers as doubles where the declared type is double (array)."""
+    if not node.has_parameter(p.name):
+        return p
+    expected = node.describe_parameter(p.name).type
+    if expected == ParameterType.PARAMETER_DOUBLE and p.type_ == Parameter.Type.INTEGER:
+        return Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
+    if (expected == ParameterType.PARAMETER_DOUBLE_ARRAY
+            and p.type_ == Parameter.Type.INTEGER_ARRAY):
+        return Parameter(p.name, Parameter.Type.DOUBLE_ARRAY, [float(v) for v in p.value])
+    return p
 
 
 def values(node, names) -> dict:
@@ -69,7 +130,7 @@ def trigger_service(node, name, callback):
     return node.create_service(Trigger, name, guarded)
 
 
-def validator(node, check):
+def _validator(node, check):
     """An on-set callback: ``check(changes)`` with ``{name: value}`` of the
     parameters being set raises a :class:`PanelDeployError` to refuse them,
     whose message reaches the caller as the reason."""
@@ -85,7 +146,7 @@ def validator(node, check):
 
 
 class WorkerNode(Node):
-    """A node that follows ``/panel_deploy/model`` and runs one long job at a
+    """A node that follows ``panel_deploy/model`` and runs one long job at a
     time (a deployment, a search) in a thread of its own, so that its
     services answer at once."""
 
@@ -93,7 +154,7 @@ class WorkerNode(Node):
         super().__init__(name, **kwargs)
         self.scene = None  # the last valid scene received
         self._worker = None
-        self.create_subscription(String, "/panel_deploy/model", self._on_model, messages.LATCHED)
+        self.create_subscription(String, "panel_deploy/model", self._on_model, messages.LATCHED)
 
     def _on_model(self, msg):
         try:
@@ -110,13 +171,26 @@ class WorkerNode(Node):
         if self.running:
             response.success, response.message = False, f"{job} is running; {stop} it first"
         elif self.scene is None:
-            response.success, response.message = False, "no model yet on /panel_deploy/model"
+            response.success, response.message = False, (
+                "no model yet on " + self.resolve_topic_name("panel_deploy/model"))
         else:
             return False
         return True
 
-    def start_job(self, target, *args) -> None:
-        self._worker = threading.Thread(target=target, args=args, daemon=True)
+    def start_job(self, job: str, report, target, *args) -> None:
+        """Run ``target(*args)`` in the worker thread. An exception ends the
+        job, not the node: it is logged and ends as an ERROR status on
+        ``report`` (a DiagnosticArray publisher), and the next request runs."""
+        def guarded():
+            try:
+                target(*args)
+            except Exception as e:
+                text = f"{job} failed: {type(e).__name__}: {e}"
+                self.get_logger().error(text)
+                report.publish(messages.diagnostics(
+                    self.get_clock().now().nanoseconds * 1e-9,
+                    messages.status(self.get_fully_qualified_name(), messages.ERROR, text)))
+        self._worker = threading.Thread(target=guarded, daemon=True)
         self._worker.start()
 
 
@@ -131,19 +205,31 @@ def spin(nodes, stop: threading.Event) -> None:
     for node in nodes:
         executor.add_node(node)
     try:
-        while not stop.is_set() and rclpy.ok():
-            try:
-                executor.spin_once(timeout_sec=0.05)
-            except Exception as e:  # a failing callback must not take the node down
-                nodes[0].get_logger().error(f"callback failed: {type(e).__name__}: {e}")
+        _spin_while(executor, nodes[0], lambda: not stop.is_set())
     finally:
-        for node in nodes:
-            close = getattr(node, "close", None)
-            if close is not None:
-                close()
+        # Workers are stopped and joined while the executor still spins: one
+        # may be waiting on a service answer or a callback to end its job.
+        closing = threading.Thread(target=_close, args=(nodes,), daemon=True)
+        closing.start()
+        _spin_while(executor, nodes[0], closing.is_alive)
         executor.shutdown(timeout_sec=2.0)
         for node in nodes:
             node.destroy_node()
+
+
+def _spin_while(executor, node, condition) -> None:
+    while condition() and rclpy.ok():
+        try:
+            executor.spin_once(timeout_sec=0.05)
+        except Exception as e:  # a failing callback must not take the node down
+            node.get_logger().error(f"callback failed: {type(e).__name__}: {e}")
+
+
+def _close(nodes) -> None:
+    for node in nodes:
+        close = getattr(node, "close", None)
+        if close is not None:
+            close()
 
 
 def start(argv=None) -> threading.Event:

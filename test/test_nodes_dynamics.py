@@ -16,7 +16,7 @@ from visualization_msgs.msg import MarkerArray
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_states
 from panel_deploy.live import DynamicsParameters, configure
-from panel_deploy.nodes import messages
+from panel_deploy.nodes import load, messages
 from panel_deploy.scene import load_scene, resolve_scene
 from ros_harness import Client, NodeProcess, wait_for
 
@@ -198,7 +198,7 @@ def test_bad_values_at_start_are_one_line_and_exit_2(tmp_path, given, name):
 def test_a_failing_deployment_is_an_error_status_and_the_node_deploys_again(monkeypatch,
                                                                             compiled_nodes):
     """The node in this process, its deployment made to fail after three samples."""
-    from panel_deploy.nodes import dynamics as node_module
+    node_module = load("dynamics")  # panel_deploy.nodes.dynamics is the executable
 
     class Failing(node_module.Deployment):
         def __iter__(self):
@@ -235,3 +235,31 @@ def test_a_failing_deployment_is_an_error_status_and_the_node_deploys_again(monk
         node.destroy_node()
         client.close()
         model.stop()
+
+
+def test_sigint_mid_deployment_stops_it_and_ends_cleanly(compiled_nodes):
+    """The worker is stopped and joined while the executor still spins: the
+    outcome of what was computed goes out, and the process ends at once."""
+    model = NodeProcess("array_model", "scene:=paper_4x4", namespace="/interrupted")
+    dynamics = NodeProcess("dynamics", "t_end:=2.0", "real_time_factor:=1.0",
+                           namespace="/interrupted")
+    client = Client("dynamics_interrupt_test")
+    diagnostics = client.listen(DiagnosticArray, "/diagnostics")
+    states = client.listen(JointState, "/interrupted/joint_states", messages.STREAM)
+    try:
+        replies = []
+        wait_for(lambda: replies.append(client.trigger("/interrupted/dynamics/deploy"))
+                 or "no model" not in replies[-1].message, what="the model")
+        assert replies[-1].success, replies[-1].message
+        wait_for(lambda: len(states) > 20, what="the deployment under way")
+        code, seconds, err = dynamics.stop()
+        assert code == 0 and seconds < 3.0 and "Traceback" not in err, (code, seconds, err)
+        wait_for(lambda: any(s.name == "/interrupted/dynamics" for d in list(diagnostics)
+                             for s in d.status), timeout=5, what="the outcome")
+        outcome, = [s for d in diagnostics for s in d.status if s.name == "/interrupted/dynamics"]
+        assert outcome.message.startswith("stopped at t = "), outcome.message
+        assert int(messages.values(outcome)["samples"]) < 401
+    finally:
+        client.close()
+        model.stop()
+        dynamics.stop()

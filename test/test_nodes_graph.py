@@ -4,14 +4,17 @@ import json
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
 import pytest
+from ros_harness import Client, NodeProcess
 
 from panel_deploy.collision import CollisionSettings, check_trajectory
 from panel_deploy.dynamics import simulate
 from panel_deploy.live import DynamicsParameters, configure
+from panel_deploy.nodes import load
 from panel_deploy.scene import load_scene, resolve_scene
 
 CLI = str(Path(sys.executable).parent / "panel-deploy")
@@ -31,6 +34,30 @@ def test_run_paper_scene_matches_simulate(compiled_nodes):
     assert first["pair"] == list(report.first_collision.names)
     assert abs(first["t"] - report.first_collision.t) <= 0.005
     assert "t = " in proc.stderr and "collision" in proc.stderr
+
+
+def test_the_driver_drives_nodes_in_processes_of_their_own(compiled_nodes):
+    """run's driver knows the nodes by their topics and services only."""
+    ns = "/separate"
+    procs = [NodeProcess("array_model", "scene:=paper_4x4", namespace=ns),
+             NodeProcess("dynamics", "t_end:=0.6", "real_time_factor:=0.0", namespace=ns),
+             NodeProcess("collision_monitor", namespace=ns)]
+    client = Client("driver_test")
+    driver = load("graph").Driver(threading.Event(), context=client.context, namespace=ns)
+    client.executor.add_node(driver)
+    try:
+        driver.drive(optimise=False)
+    finally:
+        client.executor.remove_node(driver)
+        driver.destroy_node()
+        client.close()
+        for p in procs:
+            p.stop()
+    s = driver.summary
+    first = s["collision"]["first_collision"]
+    assert driver.exit_code == 1 and s["t_end"] == pytest.approx(0.6)
+    assert first["pair"] == ["r1c2+r1c3", "r2c2+r2c3"] and 0.41 <= first["t"] <= 0.42
+    assert s["collision"]["samples_checked"] == 121 and s["collision"]["d"] == pytest.approx(0.0454, abs=1e-3)
 
 
 def test_run_optimise_then_deploys_flat_without_collision(compiled_nodes):

@@ -28,6 +28,7 @@ from ..errors import PanelDeployError, SceneError
 from ..live import scene_from_yaml
 from . import messages
 
+
 def declare(node, parameters: dict, check=None) -> None:
     """Declare ``{name: (default, description[, (low, high)])}``, then set the
     values given at start (command line, params file, overrides) through the
@@ -61,7 +62,8 @@ def declare(node, parameters: dict, check=None) -> None:
     for p in given:  # rclpy's reason for a wrong type does not name the parameter
         expected = node.describe_parameter(p.name).type
         if p.type_.value != expected:
-            raise SceneError(p.name, f"expected {_TYPE_NAMES[expected]}, got {p.value!r}")
+            raise SceneError(p.name, f"expected {_TYPE_NAMES.get(expected, 'another type')}, "
+                                     f"got {p.value!r}")
     if given:
         result = node.set_parameters_atomically(given)
         if not result.successful:

@@ -138,13 +138,14 @@ def test_approach_speed_on_a_fixed_grid_is_rate_independent(scene):
 @pytest.mark.parametrize("sigma", [1e-4, 1e-3, 3e-3])
 def test_noise_aware_check_has_no_false_alarm_and_finds_the_impact(khz, clean, sigma):
     s, model, result = khz
-    truth = check_trajectory(model, result, CollisionSettings.from_scene(s), stop_at_first=False)
-    colliding = {e.names for e in truth.events}  # every pair in contact by that sample
+    clean_stream, _ = _feed(model, CollisionSettings.from_scene(s), result.t, result.theta)
+    impact = {e.names for e in clean_stream.check.monitor.events if e.t <= clean.t + 0.005}
     rng = np.random.default_rng(7)
     noisy = result.theta + rng.normal(0.0, sigma, result.theta.shape)
     _, first = _feed(model, CollisionSettings.from_scene(s, noise=sigma), result.t, noisy)
-    assert first is not None and first.names in colliding | {("r1c1", "r2c2+r2c3")}
-    assert 0.0 <= first.t - clean.t <= 4e-3 + 1e3 * sigma * 1e-3
+    assert first is not None and first.names in impact
+    # The depth noise can fake grows with sigma: about 1 ms later per mrad at 4 m/s.
+    assert 0.0 <= first.t - clean.t <= 1e-3 * (1.0 + 1e3 * sigma)
 
 
 def test_noise_blind_check_raises_false_alarms(khz, clean):

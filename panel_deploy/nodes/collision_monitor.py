@@ -1,16 +1,22 @@
-"""``collision_monitor`` node: the streaming collision check of ``/joint_states``.
+"""``collision_monitor`` node: the streaming collision check of ``joint_states``.
 
-Fed by the simulator or by a real array's encoders. Per deployment it
-publishes each collision as it begins (``/panel_deploy/collision_events``,
+Fed by the simulator or by a real array's encoders (core:
+:class:`~panel_deploy.collision.StreamCheck`, which states how stamps, gaps
+and hinges the stream lacks are handled; ``noise`` makes the check
+noise-aware as :mod:`panel_deploy.collision.monitor` says). Per deployment it
+publishes each collision as it begins (``panel_deploy/collision_events``,
 one status per event, and the pair highlighted on
-``/panel_deploy/collision_markers``) and its verdict on ``/diagnostics``
-(OK, or ERROR after a collision; twice a second and at every event).
-A malformed message gets a WARN and is skipped.
+``panel_deploy/collision_markers``, cleared when a deployment starts) and its
+verdict on ``/diagnostics`` (OK; WARN when messages were refused or the
+stream had gaps; ERROR after a collision; twice a second and at every
+event). A malformed message is skipped and counted; WARNs about it come at
+most once a second per kind, saying how many were held back.
 """
 
 from __future__ import annotations
 
 import math
+import re
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
@@ -19,15 +25,22 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from ..build import build_model
-from ..collision import CollisionSettings
+from ..collision import CollisionSettings, StreamCheck
 from ..errors import PanelDeployError, SceneError
 from ..kinematics import forward_kinematics
-from ..live import StreamCheck, scene_from_yaml
+from ..live import Throttle, scene_from_yaml
 from . import messages, runtime
 
 PARAMETERS = {
-    "tolerance": (-1.0, "interference depth that counts as a collision, m; negative: the scene's"),
+    "tolerance": (-1.0, "interference depth that counts as a collision, m; negative: the scene's",
+                  (-1.0, 0.02)),
     "refine": (True, "also check between samples (Hermite motion), so no collision is missed"),
+    "noise": (0.0, "standard deviation of the measured angles, rad (encoders); 0 for a simulated "
+                   "stream", (0.0, 0.1)),
+    "speed_interval": (-1.0, "spacing of Eq. 7's distances, s; 0: the stream's own samples; "
+                             "negative: the scene's sample interval", (-1.0, 10.0)),
+    "stamps": ("header", "header: a joint state's time is its header.stamp; receipt: the time it "
+                         "arrived (drivers that leave stamps unfilled)"),
 }
 
 
@@ -48,6 +61,7 @@ class CollisionMonitorNode(Node):
         self.create_subscription(String, "panel_deploy/model", self._on_model, messages.LATCHED)
         self.create_subscription(JointState, "joint_states", self._on_joint_state, messages.STREAM)
         runtime.trigger_service(self, "~/reset", self._reset)
+        self._throttle = Throttle()
         self.create_timer(0.5, self._publish_verdict)
 
     def _collision(self, changes=None) -> CollisionSettings:
@@ -56,8 +70,18 @@ class CollisionMonitorNode(Node):
         tolerance = section.tolerance if p["tolerance"] < 0 else p["tolerance"]
         if not math.isfinite(tolerance):
             raise SceneError("tolerance", f"expected a finite number, got {tolerance!r}")
-        return CollisionSettings.from_scene(section, tolerance=tolerance, refine=p["refine"],
-                                            margin=max(CollisionSettings.margin, tolerance))
+        if p["stamps"] not in ("header", "receipt"):
+            raise SceneError("stamps", f"expected header or receipt, got {p['stamps']!r}")
+        interval = p["speed_interval"]
+        if interval < 0:
+            sim = self.scene.simulation if self.scene is not None else None
+            interval = sim.t_end / (sim.samples - 1) if sim is not None else 0.0
+        try:
+            return CollisionSettings.from_scene(section, tolerance=tolerance, refine=p["refine"],
+                                                margin=max(CollisionSettings.margin, tolerance),
+                                                noise=float(p["noise"]), speed_interval=interval)
+        except SceneError as e:  # named as the node's parameter, not the scene key
+            raise SceneError(e.path.removeprefix("collision."), e.reason) from None
 
     def _apply(self, params):
         if self.stream is not None:  # from the next deployment on
@@ -68,18 +92,33 @@ class CollisionMonitorNode(Node):
             self.scene = scene_from_yaml(msg.data)
             self.stream = StreamCheck(build_model(self.scene), self._collision())
         except PanelDeployError as e:
-            self._warn(f"ignored a model: {e}")
+            self._warn("model", f"ignored a model: {e}")
             return
         self._publish_verdict()  # at once: clients learn that the model has reached the monitor
 
     def _on_joint_state(self, msg):
-        if self.stream is None:
-            return self._warn("joint state skipped: no model yet on /panel_deploy/model")
+        stream = self.stream
+        if stream is None:
+            return self._warn("no model", "joint state skipped: no model yet on panel_deploy/model")
         try:
-            t, theta, omega = messages.read_joint_state(msg, self.stream.names, self.stream.required)
-            found = self.stream.update(t, theta, omega)
+            t, names, position, velocity = messages.read_joint_state(msg, stream.names)
+            if self.get_parameter("stamps").value == "receipt":
+                t = self.get_clock().now().nanoseconds * 1e-9
+            theta, omega = stream.coordinates(names, position, velocity)
+            deployments = stream.deployments
+            found = stream.update(t, theta, omega)
         except PanelDeployError as e:
-            return self._warn(f"joint state skipped: {e}")
+            stream.refuse(str(e).split(":", 1)[0][:40])
+            # One kind per fault, whatever its numbers: a flood of the same one is throttled.
+            return self._warn(re.sub(r"\d+(\.\d*)?(e[-+]?\d+)?", "#", str(e))[:80],
+                              f"joint state skipped: {e}")
+        if stream.deployments != deployments:
+            self._clear_markers()
+        if stream.last_gap is not None:
+            self._warn("gap", f"gap of {stream.last_gap * 1e3:.1f} ms in joint_states before "
+                              f"t = {t - stream.origin:.4f} s (typical interval "
+                              f"{stream.typical_interval * 1e3:.2f} ms): collisions in it are "
+                              f"located on interpolated motion")
         if found:
             R, p = forward_kinematics(self.stream.model, theta)
             self.events.publish(messages.diagnostics(
@@ -87,7 +126,13 @@ class CollisionMonitorNode(Node):
             self.markers.publish(messages.collision_markers(self.stream.model, found[0], R, p))
             self._publish_verdict()
 
-    def _warn(self, text):
+    def _warn(self, kind, text):
+        """A WARN on the log and /diagnostics, at most one a second of each kind."""
+        held = self._throttle(kind)
+        if held is None:
+            return
+        if held:
+            text += f" ({held} more like it held back)"
         self.get_logger().warning(text)
         self.diagnostics.publish(messages.diagnostics(
             self.get_clock().now().nanoseconds * 1e-9, messages.status(self.status_name, messages.WARN, text)))
@@ -96,8 +141,9 @@ class CollisionMonitorNode(Node):
         if self.stream is None:
             return
         level, text, values = self.stream.verdict()
+        stamp = values["origin"] + values["t"] if "t" in values else 0.0
         self.diagnostics.publish(messages.diagnostics(
-            values.get("t") or 0.0, messages.status(self.status_name, level, text, values)))
+            stamp, messages.status(self.status_name, level, text, values)))
 
     def _clear_markers(self):
         """Take the last deployment's collision markers off displays."""

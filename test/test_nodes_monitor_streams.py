@@ -1,0 +1,198 @@
+"""The collision_monitor node (its own process) fed what a real array's driver
+sends: wall-clock and unfilled stamps, encoder noise, a hinge it does not
+measure, a gap over the impact, a flood of bad messages. Each stream's
+verdict, WARN count and the node's memory are checked."""
+
+import time
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.srv import SetParameters
+from rclpy.parameter import Parameter
+from ros_harness import Client, NodeProcess, wait_for
+from sensor_msgs.msg import JointState
+
+from panel_deploy.collision import CollisionSettings, check_trajectory
+from panel_deploy.dynamics import simulate
+from panel_deploy.dynamics.report import hinge_states
+from panel_deploy.live import DynamicsParameters, configure
+from panel_deploy.nodes import messages
+from panel_deploy.scene import load_scene, resolve_scene
+
+STATUS = "/collision_monitor"
+
+
+@pytest.fixture(scope="module")
+def deployment():
+    """The paper deployment at 1 kHz to just past its first collision, and that collision."""
+    scene, model = configure(load_scene(resolve_scene("paper_4x4")),
+                             DynamicsParameters(t_end=0.5, rate_hz=1000.0))
+    result = simulate(model, scene.simulation)
+    report = check_trajectory(model, result, CollisionSettings.from_scene(scene), stop_at_first=False)
+    names, theta, omega, _ = hinge_states(model, result)
+    return result.t, names, theta, omega, report
+
+
+@pytest.fixture(scope="module")
+def graph(compiled_nodes):
+    model = NodeProcess("array_model", "scene:=paper_4x4")
+    monitor = NodeProcess("collision_monitor")
+    client = Client("monitor_streams_test")
+    publisher = client.node.create_publisher(JointState, "/joint_states", messages.STREAM)
+    diagnostics = client.listen(DiagnosticArray, "/diagnostics")
+    events = client.listen(DiagnosticArray, "/panel_deploy/collision_events")
+    wait_for(lambda: publisher.get_subscription_count() >= 1, what="the monitor")
+    wait_for(lambda: any(s.message in ("waiting for joint states", "no collision")
+                         for s in statuses(diagnostics)), what="the model")
+    yield client, publisher, diagnostics, events, monitor
+    client.close()
+    for p in (model, monitor):
+        code, _, err = p.stop()
+        assert code == 0 and "Traceback" not in err, err
+
+
+def statuses(diagnostics, level=None):
+    return [s for d in list(diagnostics) for s in d.status
+            if s.name == STATUS and (level is None or s.level == level)]
+
+
+def values(status):
+    return {kv.key: kv.value for kv in status.values}
+
+
+def new_deployment(client, diagnostics, events):
+    assert client.trigger(f"{STATUS}/reset").success
+    diagnostics.clear()
+    events.clear()
+
+
+def publish(publisher, names, t, position, velocity=None):
+    msg = JointState()
+    msg.header.stamp = messages.stamp(t)
+    msg.name = list(names)
+    msg.position = [float(x) for x in position]
+    msg.velocity = [] if velocity is None else [float(x) for x in velocity]
+    publisher.publish(msg)
+
+
+def verdict_after(diagnostics, samples, timeout=120.0):
+    """The first verdict that has checked ``samples`` samples."""
+    found = []
+
+    def done():
+        found[:] = [s for s in statuses(diagnostics) if values(s).get("samples") == str(samples)]
+        return found
+    wait_for(done, timeout=timeout, what=f"{samples} samples checked")
+    return found[-1]
+
+
+def rss_mb(process) -> float:
+    with open(f"/proc/{process.proc.pid}/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("VmRSS")) / 1024
+
+
+def set_parameter(client, name, value):
+    result, = client.call(SetParameters, f"{STATUS}/set_parameters", SetParameters.Request(
+        parameters=[Parameter(name, value=value).to_parameter_msg()])).results
+    assert result.successful, result.reason
+
+
+def test_wall_clock_stamps_memory_stays_bounded(graph, deployment):
+    """10,000 messages stamped now() as they leave, positions only: the
+    monitor's memory grows by less than 50 MB and the collision is found."""
+    client, publisher, diagnostics, events, monitor = graph
+    t, names, theta, _, report = deployment
+    new_deployment(client, diagnostics, events)
+    rows = np.resize(np.arange(len(t)), 10_000)  # the deployment, then over again
+    for j in rows[:500]:
+        publish(publisher, names, time.time(), theta[j])
+        time.sleep(0.001)  # about the encoders' 1 kHz: the monitor keeps up, no queue drops
+    verdict_after(diagnostics, 500)
+    before = rss_mb(monitor)
+    for j in rows[500:]:
+        publish(publisher, names, time.time(), theta[j])
+        time.sleep(0.001)
+    last = verdict_after(diagnostics, 10_000, timeout=300)
+    grown = rss_mb(monitor) - before
+    assert grown < 50, f"RSS grew {grown:.1f} MB"
+    assert last.level == messages.ERROR
+    first = values(last)["first_collision_pair"]
+    assert first in {",".join(e.names) for e in report.events}, first
+
+
+def test_unfilled_stamps_warn_a_few_times_and_the_verdict_says_so(graph, deployment):
+    client, publisher, diagnostics, events, _ = graph
+    t, names, theta, _, _ = deployment
+    new_deployment(client, diagnostics, events)
+    start = time.monotonic()
+    for j in range(2000):
+        publish(publisher, names, 0.0, theta[j % len(t)])
+        time.sleep(0.0005)
+    seconds = time.monotonic() - start
+    wait_for(lambda: any(values(s).get("refused") == "1999" for s in statuses(diagnostics)),
+             timeout=60, what="1999 refused messages in a verdict")
+    verdict = [s for s in statuses(diagnostics) if values(s).get("refused") == "1999"][-1]
+    assert verdict.level == messages.WARN and "1999 joint states refused" in verdict.message
+    assert values(verdict)["samples"] == "1"  # one deployment, of the first message
+    warns = [s for s in statuses(diagnostics, messages.WARN) if "skipped" in s.message]
+    assert 1 <= len(warns) <= seconds + 3, len(warns)
+    assert any("more like it" in s.message for s in warns)
+    assert not events
+
+
+def test_a_stream_without_a_loop_hinge_gives_the_same_verdict(graph, deployment):
+    client, publisher, diagnostics, events, _ = graph
+    t, names, theta, omega, report = deployment
+    new_deployment(client, diagnostics, events)
+    keep = [i for i, name in enumerate(names) if name != "r2c1-r3c1"]
+    for j in range(len(t)):
+        publish(publisher, [names[i] for i in keep], t[j], theta[j, keep], omega[j, keep])
+    last = verdict_after(diagnostics, len(t))
+    assert last.level == messages.ERROR
+    assert values(last)["first_collision_pair"] == ",".join(report.first_collision.names)
+    assert abs(float(values(last)["first_collision_t"]) - report.first_collision.t) <= 1e-3
+    assert "r2c1-r3c1" in values(last)["solved"]
+    assert not statuses(diagnostics, messages.WARN)
+
+
+def test_a_hinge_on_no_loop_cannot_be_left_out(graph, deployment):
+    client, publisher, diagnostics, events, _ = graph
+    t, names, theta, _, _ = deployment
+    new_deployment(client, diagnostics, events)
+    keep = [i for i, name in enumerate(names) if name != "r2c2-r3c2"]
+    for j in range(5):
+        publish(publisher, [names[i] for i in keep], t[j], theta[j, keep])
+    wait_for(lambda: statuses(diagnostics, messages.WARN), what="a WARN")
+    assert "'r2c2-r3c2'" in statuses(diagnostics, messages.WARN)[0].message
+
+
+def test_a_gap_over_the_impact_is_reported(graph, deployment):
+    client, publisher, diagnostics, events, _ = graph
+    t, names, theta, omega, report = deployment
+    new_deployment(client, diagnostics, events)
+    hit = report.first_collision.t
+    rows = [j for j in range(len(t)) if not hit - 0.09 < t[j] < hit + 0.01]
+    for j in rows:
+        publish(publisher, names, t[j], theta[j], omega[j])
+    last = verdict_after(diagnostics, len(rows))
+    gaps = [s for s in statuses(diagnostics, messages.WARN) if "gap of" in s.message]
+    assert len(gaps) == 1 and "gap of 101.0 ms" in gaps[0].message  # 100 ms left out
+    assert values(last)["gaps"] == "1" and last.level == messages.ERROR
+
+
+def test_noise_parameter_stops_false_alarms(graph, deployment):
+    client, publisher, diagnostics, events, _ = graph
+    t, names, theta, _, report = deployment
+    noisy = theta + np.random.default_rng(3).normal(0.0, 1e-3, theta.shape)
+    set_parameter(client, "noise", 1e-3)
+    try:
+        new_deployment(client, diagnostics, events)
+        for j in range(len(t)):
+            publish(publisher, names, t[j], noisy[j])
+        last = verdict_after(diagnostics, len(t))
+    finally:
+        set_parameter(client, "noise", 0.0)
+    assert last.level == messages.ERROR
+    assert float(values(last)["first_collision_t"]) >= report.first_collision.t
+    assert values(last)["first_collision_pair"] in {",".join(e.names) for e in report.events}

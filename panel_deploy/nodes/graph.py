@@ -156,11 +156,19 @@ class Driver(Node):
                 what = self.result["message"] if self.result else self.search_failed
                 print(f"optimise: {what}; deploying with the scene's stiffness",
                       file=sys.stderr, flush=True)
+        # A sample sent before the monitor's subscription is known to the
+        # dynamics node is lost to it: in processes of their own, discovery takes a while.
+        self._wait(self._monitor_listens, "the collision monitor on joint_states")
         self.events.clear()
         self.deploying = True
         print(self.call("dynamics/deploy"), file=sys.stderr, flush=True)
         self._wait(lambda: self.outcome is not None, "the deployment", timeout=1e9)
         self._finish()
+
+    def _monitor_listens(self) -> bool:
+        topic = self.resolve_topic_name("joint_states")
+        return any(f"{i.node_namespace.rstrip('/')}/{i.node_name}" == self.monitor
+                   for i in self.get_subscriptions_info_by_topic(topic))
 
     def stop_deployment(self) -> None:
         """After an interrupt: stop a running deployment and summarise what was computed."""

@@ -54,6 +54,10 @@ def test_each_array_has_its_own_topics_and_verdict(arrays):
     for ns in ARRAYS:  # each monitor has its model when its first verdict comes
         wait_for(lambda: statuses(diagnostics, f"{ns}/collision_monitor"), timeout=60,
                  what=f"{ns}/collision_monitor")
+        # Samples sent before discovery has matched the two are lost to the monitor.
+        wait_for(lambda: client.node.count_publishers(f"{ns}/joint_states") == 1
+                 and client.node.count_subscribers(f"{ns}/joint_states") == 1,
+                 what=f"{ns}'s dynamics and monitor on joint_states")
     topics = {name for name, _ in client.node.get_topic_names_and_types()}
     for topic in ("joint_states", "robot_description", "panel_deploy/model",
                   "panel_deploy/collision_events", "panel_deploy/collision_markers"):

@@ -42,12 +42,12 @@ def set_params(client, *params):
     return reply.results
 
 
-def deploy(client):
+def deploy(client, node="/dynamics"):
     """Call ~/deploy, again while the model has not reached the node yet."""
     replies = []
 
     def attempt():
-        replies.append(client.trigger("/dynamics/deploy"))
+        replies.append(client.trigger(f"{node}/deploy"))
         return replies[-1].success or "no model" not in replies[-1].message
     wait_for(attempt, timeout=60, what="the model to reach the dynamics node")
     return replies[-1]
@@ -216,10 +216,8 @@ def test_a_failing_deployment_is_an_error_status_and_the_node_deploys_again(monk
     outcomes = lambda: [s for d in list(diagnostics) for s in d.status  # noqa: E731
                         if s.name == "/guarded/dynamics"]
     try:
-        replies = []
-        wait_for(lambda: replies.append(client.trigger("/guarded/dynamics/deploy"))
-                 or "no model" not in replies[-1].message, what="the model")
-        assert replies[-1].success, replies[-1].message
+        reply = deploy(client, "/guarded/dynamics")
+        assert reply.success, reply.message
         wait_for(outcomes, what="the failure on /diagnostics")
         failed, = outcomes()
         assert failed.level == messages.ERROR
@@ -247,10 +245,8 @@ def test_sigint_mid_deployment_stops_it_and_ends_cleanly(compiled_nodes):
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")
     states = client.listen(JointState, "/interrupted/joint_states", messages.STREAM)
     try:
-        replies = []
-        wait_for(lambda: replies.append(client.trigger("/interrupted/dynamics/deploy"))
-                 or "no model" not in replies[-1].message, what="the model")
-        assert replies[-1].success, replies[-1].message
+        reply = deploy(client, "/interrupted/dynamics")
+        assert reply.success, reply.message
         wait_for(lambda: len(states) > 20, what="the deployment under way")
         code, seconds, err = dynamics.stop()
         assert code == 0 and seconds < 3.0 and "Traceback" not in err, (code, seconds, err)

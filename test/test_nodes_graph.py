@@ -92,7 +92,18 @@ def test_bad_scene_is_one_line_before_any_node_starts():
     assert len(proc.stderr.strip().splitlines()) == 1
 
 
-@pytest.mark.parametrize("flag, value", [("--rate", "0"), ("--real-time-factor", "-1")])
+def test_run_in_a_namespace(compiled_nodes):
+    proc = subprocess.run([CLI, "run", "paper_4x4", "--namespace", "array7", "--real-time-factor",
+                           "0", "--json", "--set", "simulation.t_end=0.3"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1, proc.stderr  # never flat by 0.3 s
+    assert "[array7.array_model]" in proc.stderr  # rclpy's logger name of /array7/array_model
+    summary = json.loads(proc.stdout)
+    assert summary["t_end"] == pytest.approx(0.3) and summary["collision"]["samples_checked"] == 61
+
+
+@pytest.mark.parametrize("flag, value", [("--rate", "0"), ("--real-time-factor", "-1"),
+                                         ("--namespace", "two words")])
 def test_bad_flags_are_one_line(flag, value):
     proc = subprocess.run([CLI, "run", "paper_4x4", flag, value], capture_output=True, text=True,
                           timeout=120)

@@ -196,3 +196,21 @@ def test_noise_parameter_stops_false_alarms(graph, deployment):
     assert last.level == messages.ERROR
     assert float(values(last)["first_collision_t"]) >= report.first_collision.t
     assert values(last)["first_collision_pair"] in {",".join(e.names) for e in report.events}
+
+
+def test_receipt_stamps_take_unfilled_stamps(graph, deployment):
+    """stamps:=receipt times each joint state by its arrival: a driver's zero
+    stamps then make a deployment instead of refusals."""
+    client, publisher, diagnostics, events, _ = graph
+    t, names, theta, _, _ = deployment
+    set_parameter(client, "stamps", "receipt")
+    try:
+        new_deployment(client, diagnostics, events)
+        for j in range(200):
+            publish(publisher, names, 0.0, theta[j])
+            time.sleep(0.001)
+        last = verdict_after(diagnostics, 200)
+    finally:
+        set_parameter(client, "stamps", "header")
+    assert values(last)["refused"] == "0" and last.level == messages.OK
+    assert 0.15 < float(values(last)["t"]) < 5.0  # wall seconds since the first arrival

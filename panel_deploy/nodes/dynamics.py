@@ -7,6 +7,13 @@ simulated second, paced by ``real_time_factor``, stamped with simulated
 time; ``panel_deploy/panels`` follows at a display rate. The outcome ends on
 ``/diagnostics`` (its summary, as ``panel-deploy simulate --json`` prints it,
 included), or an ERROR saying why the deployment failed; the node deploys again.
+
+``/tf`` carries every sample's link frames (each tree joint's child link in its
+parent's, as robot_state_publisher would send them, which cannot hold the
+loop) and ``/tf_static`` the ground's, so that RViz and Foxglove show the array
+live; frames are ``frame_prefix`` + the URDF's link names (and ``world``).
+tf2_msgs has no wheel on PyPI: without ``pip install ./vendor/tf2_msgs`` the
+node says so once and publishes no /tf.
 """
 
 from __future__ import annotations
@@ -37,12 +44,17 @@ _DOC = {
     "rate_hz": "samples published per simulated second",
     "real_time_factor": "simulated seconds per wall second; 0: as fast as computed",
 }
+#: The node's own parameter, beside DynamicsParameters'.
+FRAME_PREFIX = "frame_prefix"
+_FRAME_DOC = ("prefix of every frame on /tf, /tf_static and the panel markers (like "
+              "robot_state_publisher's): two arrays side by side, e.g. 'array1/'")
 #: Ranges ``ros2 param describe`` shows; the rest of each check is DynamicsParameters'.
 _RANGE = {"rtol": (0.0, 1.0), "t_end": (0.0, 600.0), "rate_hz": (0.0, 1e6),
           "real_time_factor": (0.0, math.inf)}
 PARAMETERS = {f.name: (Parameter.Type.DOUBLE_ARRAY if f.name == "stiffness" else f.default,
                        _DOC[f.name], *([_RANGE[f.name]] if f.name in _RANGE else []))
               for f in fields(DynamicsParameters)}
+PARAMETERS[FRAME_PREFIX] = ("", _FRAME_DOC)
 #: /panel_deploy/panels per wall second at most (and always the last sample).
 PANEL_RATE = 30.0
 
@@ -55,6 +67,15 @@ class DynamicsNode(runtime.WorkerNode):
         self.panels = self.create_publisher(MarkerArray, "panel_deploy/panels", messages.EVENTS)
         self.clock = self.create_publisher(Clock, "/clock", messages.STREAM)
         self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", messages.EVENTS)
+        # Absolute, as tf2's own: a namespaced array keeps its frames apart by frame_prefix.
+        if messages.TFMessage is None:
+            self.tf = self.tf_static = None
+            self.get_logger().warning("tf2_msgs is not installed: no /tf or /tf_static "
+                                      "(pip install ./vendor/tf2_msgs, see the README)")
+        else:
+            self.tf = self.create_publisher(messages.TFMessage, "/tf", messages.TF)
+            self.tf_static = self.create_publisher(messages.TFMessage, "/tf_static",
+                                                   messages.LATCHED)
         runtime.trigger_service(self, "~/deploy", self._deploy)
         runtime.trigger_service(self, "~/stop", self._stop)
         self.deployment = None  # the current or last Deployment
@@ -62,10 +83,15 @@ class DynamicsNode(runtime.WorkerNode):
     def parameters(self, changes=None) -> DynamicsParameters:
         current = runtime.values(self, PARAMETERS)
         current.update(changes or {})
+        del current[FRAME_PREFIX]
         current["stiffness"] = tuple(float(k) for k in current["stiffness"])
         return DynamicsParameters(**current)
 
     def _check(self, changes):
+        prefix = changes.get(FRAME_PREFIX, "")
+        if prefix.startswith("/") or any(c.isspace() for c in prefix):
+            raise PanelDeployError(f"{FRAME_PREFIX}: {prefix!r}: tf2 frames start with no '/' "
+                                   "and hold no spaces")
         params = self.parameters(changes)
         if self.scene is not None:  # counts and values the scene must accept
             configure(self.scene, params)
@@ -80,27 +106,36 @@ class DynamicsNode(runtime.WorkerNode):
             response.success, response.message = False, str(e)
             return response
         self.deployment = Deployment(model, scene.simulation)
-        self.start_job("the deployment", self.diagnostics, self._run, self.deployment, scene, params)
+        prefix = self.get_parameter(FRAME_PREFIX).value
+        self.start_job("the deployment", self.diagnostics, self._run, self.deployment, scene, params,
+                       prefix)
         response.success = True
         response.message = (f"deploying {scene.name or scene.source} to {scene.simulation.t_end:g} s "
                             f"({scene.simulation.samples} samples)")
         return response
 
-    def _run(self, deployment, scene, params):
+    def _run(self, deployment, scene, params, prefix=""):
         model = deployment.model
         pacer = Pacer(params.real_time_factor, deployment.stopping)
-        panels, shown = None, -math.inf
+        panels, shown, tf = None, -math.inf, None
+        if self.tf_static is not None:
+            self.tf_static.publish(messages.tf_static(model, prefix))
         start = time.monotonic()
         for s in deployment:
             pacer.wait(s.t)
             self.clock.publish(messages.clock(s.t))
             self.joint_states.publish(messages.joint_state(deployment.names, s.t, s.theta,
                                                            s.omega, s.torque))
+            if self.tf is not None:  # every sample: 0.1 ms each (16 panels)
+                tf = (messages.tf(model, s.rotation, s.position, s.t, prefix) if tf is None else
+                      messages.move_tf(tf, model, s.rotation, s.position, s.t))
+                self.tf.publish(tf)
             # Markers are for eyes: a display rate is enough, and filling them
             # at every sample took 2.6x the integration's time.
             now = time.monotonic()
             if now - shown >= 1.0 / PANEL_RATE or s.t >= deployment.settings.t_end:
-                panels = (messages.panel_markers(model, s.rotation, s.position, s.t)
+                panels = (messages.panel_markers(model, s.rotation, s.position, s.t,
+                                                 prefix + messages.FRAME)
                           if panels is None else
                           messages.move_markers(panels, s.rotation, s.position, s.t))
                 self.panels.publish(panels)

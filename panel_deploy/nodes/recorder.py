@@ -4,9 +4,10 @@ as ``ros2 bag record`` of them would store them, plus ``/tf``.
 Messages are written as received (CDR bytes, rclpy's stray padding
 trimmed), with log time = simulated time: a JointState's stamp, a Clock's
 value, and for everything else the last simulated time seen (0 before the
-deployment starts). The nodes publish no ``/tf`` (tf2_msgs has no wheel);
-the recorder writes it from each JointState and the model, with
-``/tf_static``, as robot_state_publisher would.
+deployment starts). The recorder writes ``/tf`` itself, from each
+JointState and the model, with ``/tf_static``, as robot_state_publisher
+would: the dynamics node's own /tf (the same transforms) needs tf2_msgs,
+which has no wheel (vendor/tf2_msgs builds it), and a recording needs none.
 """
 
 from __future__ import annotations

@@ -208,30 +208,44 @@ def _transform(t, parent, child, q, p):
         transform=_T["geometry_msgs/msg/Transform"](translation=_vector(p), rotation=q))
 
 
-def tf_message(model, rotation, position, t: float):
-    """``/tf`` at one sample: every tree joint's child link in its parent link's
-    frame, as robot_state_publisher would broadcast them (frames = URDF link names).
+def tree_transforms(model, rotation, position):
+    """Every tree joint's child link in its parent link's frame, as
+    robot_state_publisher would broadcast them (frames = URDF link names).
 
     ``rotation`` (nb, 3, 3) and ``position`` (nb, 3, m) are the body (centroid)
-    poses in ``world``.
+    poses in ``world``. Returns ``(parent, child, R, p)``: body indices (k,),
+    rotations (k, 3, 3) and translations (k, 3, m), in ``model.joints`` order.
+    The recordings' ``/tf`` and the dynamics node's are made of these.
     """
     R, p = link_poses(model, rotation, position)
     pairs = [(model.hinges[h].body_a, model.hinges[h].body_b) for h in model.joints]
     a, b = np.array(pairs).T
     R_rel = np.einsum("kji,kjl->kil", R[a], R[b])           # R_a^T R_b
     p_rel = np.einsum("kji,kj->ki", R[a], p[b] - p[a])      # R_a^T (p_b - p_a)
+    return a, b, R_rel, p_rel
+
+
+def ground_transform(model):
+    """``world`` -> the ground body's link (the URDF's fixed joint): ``(R, p)``."""
+    g = model.ground
+    R, p = link_poses(model, np.eye(3)[None].repeat(model.n_bodies, 0),
+                      np.array([b.flat_position for b in model.bodies]))
+    return R[g], p[g]
+
+
+def tf_message(model, rotation, position, t: float):
+    """``/tf`` at one sample (:func:`tree_transforms`)."""
+    a, b, R_rel, p_rel = tree_transforms(model, rotation, position)
     return _T[TF_MESSAGE](transforms=[
         _transform(t, model.bodies[i].name, model.bodies[j].name, q, d)
         for i, j, q, d in zip(a, b, _quaternions(R_rel), p_rel)])
 
 
 def tf_static(model, t: float = 0.0):
-    """``/tf_static``: ``world`` -> the ground body's link (the URDF's fixed joint)."""
-    g = model.ground
-    R, p = link_poses(model, np.eye(3)[None].repeat(model.n_bodies, 0),
-                      np.array([b.flat_position for b in model.bodies]))
-    return _T[TF_MESSAGE](transforms=[_transform(t, WORLD, model.bodies[g].name,
-                                                 _quaternions(R[g:g + 1])[0], p[g])])
+    """``/tf_static``: ``world`` -> the ground body's link (:func:`ground_transform`)."""
+    R, p = ground_transform(model)
+    return _T[TF_MESSAGE](transforms=[_transform(t, WORLD, model.bodies[model.ground].name,
+                                                 _quaternions(R[None])[0], p)])
 
 
 def status_value(v) -> str:

@@ -83,16 +83,17 @@ def _doubles(values) -> array.array:
     return array.array("d", np.ascontiguousarray(values, dtype=float).tobytes())
 
 
-def read_joint_state(msg: JointState, names, required) -> tuple:
-    """``(t, theta, omega)`` of a JointState for the hinges ``required`` (names, in order).
+def read_joint_state(msg: JointState, names) -> tuple:
+    """``(t, name, position, velocity)`` of a JointState whose joints are among ``names``.
 
-    ``names`` are all hinges the model knows (a stream may carry the cut
-    hinge too); ``omega`` is None when the message has no velocities.
+    ``t`` is the stamp in s; ``velocity`` is None when the message has none.
+    Which joints it must carry is the stream check's to say (any set the
+    loop closure completes).
 
     Raises
     ------
     TrajectoryError
-        Unknown or missing names, array lengths that do not match ``name``,
+        Unknown or repeated names, array lengths that do not match ``name``,
         or values that are not finite; the message says which field.
     """
     n = len(msg.name)
@@ -101,21 +102,16 @@ def read_joint_state(msg: JointState, names, required) -> tuple:
     unknown = sorted(set(msg.name) - set(names))
     if unknown:
         raise TrajectoryError(f"name: unknown joint {unknown[0]!r}")
-    missing = [h for h in required if h not in msg.name]
-    if missing:
-        raise TrajectoryError(f"name: missing joint {missing[0]!r}")
     if len(msg.position) != n:
         raise TrajectoryError(f"position: {len(msg.position)} values for {n} names")
     if len(msg.velocity) not in (0, n):
         raise TrajectoryError(f"velocity: {len(msg.velocity)} values for {n} names")
-    index = [list(msg.name).index(h) for h in required]
-    theta = np.asarray(msg.position, dtype=float)[index]
-    omega = np.asarray(msg.velocity, dtype=float)[index] if len(msg.velocity) else None
-    t = seconds(msg.header.stamp)
-    for field, values in (("position", theta), ("velocity", omega)):
+    position = np.asarray(msg.position, dtype=float)
+    velocity = np.asarray(msg.velocity, dtype=float) if len(msg.velocity) else None
+    for field, values in (("position", position), ("velocity", velocity)):
         if values is not None and not np.all(np.isfinite(values)):
             raise TrajectoryError(f"{field}: not finite ({values[~np.isfinite(values)][0]})")
-    return t, theta, omega
+    return seconds(msg.header.stamp), list(msg.name), position, velocity
 
 
 def _pose(rotation, position) -> Pose:

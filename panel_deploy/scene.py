@@ -19,7 +19,7 @@ from typing import Any
 
 import yaml
 
-from .errors import SceneError
+from .errors import SceneError, shown
 
 #: ``simulation.method`` names: the integrators of
 #: :data:`panel_deploy.dynamics.integrate.METHODS` (a test keeps the two equal).
@@ -56,7 +56,7 @@ def number(low=None, high=None, low_open=False, allow_inf=False, why="", floor=N
         if isinstance(v, str) and _YAML12_FLOAT.match(v.strip()):
             v = float(v)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise SceneError(path, f"expected a number, got {_type_name(v)} {v!r}")
+            raise SceneError(path, f"expected a number, got {_type_name(v)} {shown(v)}")
         v = float(v)
         if math.isnan(v) or (math.isinf(v) and not allow_inf):
             raise SceneError(path, f"expected a finite number, got {v}")
@@ -77,7 +77,7 @@ def number(low=None, high=None, low_open=False, allow_inf=False, why="", floor=N
 def integer(low=None, high=None, why=""):
     def parse(v, path):
         if isinstance(v, bool) or not isinstance(v, int):
-            raise SceneError(path, f"expected an integer, got {_type_name(v)} {v!r}")
+            raise SceneError(path, f"expected an integer, got {_type_name(v)} {shown(v)}")
         if low is not None and v < low:
             raise SceneError(path, f"expected an integer >= {low}, got {v}")
         if high is not None and v > high:
@@ -91,7 +91,7 @@ def integer(low=None, high=None, why=""):
 
 def boolean(v, path):
     if not isinstance(v, bool):
-        raise SceneError(path, f"expected true or false, got {_type_name(v)} {v!r}")
+        raise SceneError(path, f"expected true or false, got {_type_name(v)} {shown(v)}")
     return v
 
 
@@ -101,7 +101,7 @@ boolean.describe = "true/false"
 def choice(*options):
     def parse(v, path):
         if v not in options:
-            raise SceneError(path, f"expected one of {', '.join(map(str, options))}, got {v!r}")
+            raise SceneError(path, f"expected one of {', '.join(map(str, options))}, got {shown(v)}")
         return v
     parse.describe = " | ".join(options)
     return parse
@@ -109,7 +109,7 @@ def choice(*options):
 
 def vector3(v, path):
     if not isinstance(v, (list, tuple)) or len(v) != 3:
-        raise SceneError(path, f"expected a list of 3 numbers, got {v!r}")
+        raise SceneError(path, f"expected a list of 3 numbers, got {shown(v)}")
     return tuple(number()(x, f"{path}[{i}]") for i, x in enumerate(v))
 
 
@@ -121,7 +121,7 @@ _SIZE = number(0, 1e3, low_open=True, floor=1e-6, why=_WHY_SCALE)
 def cell(v, path):
     if (not isinstance(v, (list, tuple)) or len(v) != 2
             or not all(isinstance(x, int) and not isinstance(x, bool) and x >= 1 for x in v)):
-        raise SceneError(path, f"expected a cell [row, col] of integers >= 1, got {v!r}")
+        raise SceneError(path, f"expected a cell [row, col] of integers >= 1, got {shown(v)}")
     return (v[0], v[1])
 
 
@@ -130,17 +130,17 @@ cell.describe = "[row, col]"
 
 def cell_list(v, path):
     if not isinstance(v, (list, tuple)):
-        raise SceneError(path, f"expected a list of cells [row, col], got {v!r}")
+        raise SceneError(path, f"expected a list of cells [row, col], got {shown(v)}")
     return tuple(cell(x, f"{path}[{i}]") for i, x in enumerate(v))
 
 
 def cell_pairs(v, path):
     if not isinstance(v, (list, tuple)):
-        raise SceneError(path, f"expected a list of cell pairs [[r, c], [r, c]], got {v!r}")
+        raise SceneError(path, f"expected a list of cell pairs [[r, c], [r, c]], got {shown(v)}")
     out = []
     for i, pair in enumerate(v):
         if not isinstance(pair, (list, tuple)) or len(pair) != 2:
-            raise SceneError(f"{path}[{i}]", f"expected a pair of cells, got {pair!r}")
+            raise SceneError(f"{path}[{i}]", f"expected a pair of cells, got {shown(pair)}")
         out.append(tuple(sorted(cell(c, f"{path}[{i}][{j}]") for j, c in enumerate(pair))))
     return tuple(out)
 
@@ -154,7 +154,7 @@ def one_of(*parsers, describe):
                 return p(v, path)
             except SceneError as e:
                 err = e
-        raise SceneError(path, f"expected {describe}, got {v!r}") from err
+        raise SceneError(path, f"expected {describe}, got {shown(v)}") from err
     parse.describe = describe
     return parse
 
@@ -168,7 +168,7 @@ def optional(parser):
 
 def hinge_stiffness_map(v, path):
     if not isinstance(v, dict):
-        raise SceneError(path, f"expected a mapping hinge name -> stiffness, got {v!r}")
+        raise SceneError(path, f"expected a mapping hinge name -> stiffness, got {shown(v)}")
     return {str(k): number(0.0, 1e4, why=_WHY_STIFF)(x, f"{path}.{k}") for k, x in v.items()}
 
 
@@ -179,7 +179,7 @@ def groups(v, path):
     if v in ("auto", "none"):
         return v
     if not isinstance(v, list) or not all(isinstance(g, list) for g in v):
-        raise SceneError(path, f"expected auto, none or a list of lists of hinge names, got {v!r}")
+        raise SceneError(path, f"expected auto, none or a list of lists of hinge names, got {shown(v)}")
     for i, g in enumerate(v):
         if not g:
             raise SceneError(f"{path}[{i}]", "a group needs at least one hinge")
@@ -296,7 +296,7 @@ class CollisionSection:
 
 def _bounds(v, path):
     if not isinstance(v, (list, tuple)) or len(v) != 2:
-        raise SceneError(path, f"expected [lower, upper], got {v!r}")
+        raise SceneError(path, f"expected [lower, upper], got {shown(v)}")
     lo, hi = (number(0.0)(x, f"{path}[{i}]") for i, x in enumerate(v))
     if lo > hi:
         raise SceneError(path, f"lower bound {lo:g} is above upper bound {hi:g}")
@@ -371,7 +371,7 @@ def _parse_section(cls, data, path):
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise SceneError(path, f"expected a mapping, got {_type_name(data)} {data!r}")
+        raise SceneError(path, f"expected a mapping, got {_type_name(data)} {shown(data)}")
     known = {f.name: f for f in fields(cls)}
     for key in data:
         if key not in known:

@@ -1,7 +1,8 @@
 """Shared input and output checks (ROS-free): the CLI and the nodes use the same rules.
 
 * :func:`load_yaml`: YAML read by :class:`StrictLoader`, which refuses a key
-  given twice in one mapping and nesting deeper than :data:`MAX_YAML_DEPTH`.
+  given twice in one mapping, nesting deeper than :data:`MAX_YAML_DEPTH` and
+  aliases that expand the document beyond :data:`MAX_YAML_EXPANDED`.
 * :func:`check_output_path`: an output path is checked before any work is
   done (its folder exists and is writable, the path is not a folder).
 * :func:`write_atomic`: write through a temporary file renamed into place;
@@ -25,24 +26,76 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .errors import PanelDeployError, SceneError
+from .errors import PanelDeployError, SceneError, shown
 
 #: Deepest nesting of YAML collections accepted: a scene is four levels deep
 #: (section, key, list, pair); anything far deeper is a mistake or an attack
 #: (and would exhaust Python's recursion limit).
 MAX_YAML_DEPTH = 32
+#: Largest size (nodes plus scalar characters: about the length of the text)
+#: a document's aliases may expand it to. A scene or result file is a few kB;
+#: without this bound nine lines of anchors and aliases (billion laughs) expand
+#: to 10^9 values, and anything that walks or prints them takes gigabytes.
+MAX_YAML_EXPANDED = 1_000_000
 
 
 class StrictLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` refusing duplicate keys and nesting beyond :data:`MAX_YAML_DEPTH`.
+    """``yaml.SafeLoader`` refusing duplicate keys, nesting beyond :data:`MAX_YAML_DEPTH`
+    and aliases expanding the document beyond :data:`MAX_YAML_EXPANDED`.
 
     A repeated key (``simulation:`` twice) would otherwise keep the last
-    value silently and drop the first.
+    value silently and drop the first. Aliases (and merge keys) stay allowed
+    within the bound: the depth and size of a document that has any are
+    measured on what they expand to, since that is what consumers walk.
     """
 
     max_depth = MAX_YAML_DEPTH
+    max_expanded = MAX_YAML_EXPANDED
+
+    def compose_document(self):
+        self._aliased = False
+        node = super().compose_document()
+        if self._aliased:
+            self._expanded(node, 0, {})
+        return node
+
+    def _expanded(self, node, depth, memo) -> tuple:
+        """``(size, height)`` of ``node`` with its aliases written out; raises past the bounds.
+
+        Memoised per node, so a bomb costs its number of distinct nodes; a
+        recursive alias never ends and so fails the depth bound.
+        """
+        known = memo.get(id(node))
+        if known is None:
+            if depth > self.max_depth:
+                raise yaml.composer.ComposerError(
+                    None, None, f"aliases nest it deeper than {self.max_depth} levels (the limit "
+                                "of a scene file)", node.start_mark)
+            if isinstance(node, yaml.ScalarNode):
+                known = (1 + len(node.value), 0)
+            else:
+                children = (node.value if isinstance(node, yaml.SequenceNode)
+                            else [n for pair in node.value for n in pair])
+                size, height = 1, 0
+                for child in children:
+                    s, h = self._expanded(child, depth + 1, memo)
+                    size, height = size + s, max(height, h + 1)
+                    if size > self.max_expanded:
+                        raise yaml.composer.ComposerError(
+                            None, None, f"aliases expand it beyond {self.max_expanded} values "
+                                        "and characters (the limit of a scene file)",
+                            node.start_mark)
+                known = (size, height)
+            memo[id(node)] = known
+        if depth + known[1] > self.max_depth:
+            raise yaml.composer.ComposerError(
+                None, None, f"aliases nest it deeper than {self.max_depth} levels (the limit "
+                            "of a scene file)", node.start_mark)
+        return known
 
     def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            self._aliased = True
         depth = getattr(self, "_depth", 0)
         if depth >= self.max_depth:
             mark = self.peek_event().start_mark
@@ -68,7 +121,7 @@ class StrictLoader(yaml.SafeLoader):
                     continue  # the base class reports an unhashable key
                 if key in seen:
                     raise yaml.constructor.ConstructorError(
-                        None, None, f"duplicate key {key!r} (first given at line "
+                        None, None, f"duplicate key {shown(key)} (first given at line "
                                     f"{seen[key].line + 1})", key_node.start_mark)
                 seen[key] = key_node.start_mark
         return super().construct_mapping(node, deep=deep)
@@ -239,7 +292,7 @@ def finite_number(value, flag: str, *, low=None, high=None, low_open=False, inte
     kind = "an integer" if integer else "a number"
     if isinstance(value, bool) or not isinstance(value, (int, float)) or \
             (integer and not float(value).is_integer()):
-        raise SceneError(flag, f"expected {kind}, got {value!r}")
+        raise SceneError(flag, f"expected {kind}, got {shown(value)}")
     if not math.isfinite(value):
         raise SceneError(flag, f"expected a finite number, got {value}")
     if low is not None and (value <= low if low_open else value < low):

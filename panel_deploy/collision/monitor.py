@@ -68,7 +68,7 @@ from numba import njit
 
 from ..dynamics.pack import pack
 from ..dynamics.simulate import body_states
-from ..errors import SceneError, TrajectoryError
+from ..errors import SceneError, TrajectoryError, shown
 from ..model import Model
 from .geometry import CERTIFY_TOL, BoxSet, PairGeometry, box_signed_distance, pair_bound
 from .motion import HermiteSegment, PairSpeedBound
@@ -106,7 +106,7 @@ class CollisionSettings:
         for f in ("tolerance", "resolution", "time_resolution", "margin"):
             v = getattr(self, f)
             if not v >= 0 or (f in ("resolution", "time_resolution") and v == 0):
-                raise SceneError(f"collision.{f}", f"expected a number > 0, got {v!r}")
+                raise SceneError(f"collision.{f}", f"expected a number > 0, got {shown(v)}")
         if self.margin < self.tolerance:
             raise SceneError("collision.margin",
                              f"must be >= collision.tolerance ({self.tolerance:g}), got {self.margin:g}")

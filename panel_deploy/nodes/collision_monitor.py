@@ -20,7 +20,7 @@ from visualization_msgs.msg import MarkerArray
 
 from ..build import build_model
 from ..collision import CollisionSettings
-from ..errors import PanelDeployError, SceneError
+from ..errors import PanelDeployError, SceneError, shown
 from ..kinematics import forward_kinematics
 from ..live import StreamCheck, scene_from_yaml
 from . import messages, runtime
@@ -55,7 +55,7 @@ class CollisionMonitorNode(Node):
         section = self.scene.collision if self.scene is not None else CollisionSettings()
         tolerance = section.tolerance if p["tolerance"] < 0 else p["tolerance"]
         if not math.isfinite(tolerance):
-            raise SceneError("tolerance", f"expected a finite number, got {tolerance!r}")
+            raise SceneError("tolerance", f"expected a finite number, got {shown(tolerance)}")
         return CollisionSettings.from_scene(section, tolerance=tolerance, refine=p["refine"],
                                             margin=max(CollisionSettings.margin, tolerance))
 

@@ -20,7 +20,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..errors import TrajectoryError
+from ..errors import TrajectoryError, shown
 from ..record.messages import EVENT_STATUS, PANEL_COLOUR, event_fields, status_value
 
 #: Latched topics (/robot_description, /panel_deploy/model, results): a late
@@ -92,10 +92,10 @@ def read_joint_state(msg: JointState, names, required) -> tuple:
         raise TrajectoryError("name: a joint is named twice")
     unknown = sorted(set(msg.name) - set(names))
     if unknown:
-        raise TrajectoryError(f"name: unknown joint {unknown[0]!r}")
+        raise TrajectoryError(f"name: unknown joint {shown(unknown[0])}")
     missing = [h for h in required if h not in msg.name]
     if missing:
-        raise TrajectoryError(f"name: missing joint {missing[0]!r}")
+        raise TrajectoryError(f"name: missing joint {shown(missing[0])}")
     if len(msg.position) != n:
         raise TrajectoryError(f"position: {len(msg.position)} values for {n} names")
     if len(msg.velocity) not in (0, n):

@@ -46,7 +46,15 @@ SHOWN_LENGTH = 80
 
 def _short_repr():
     import reprlib
-    r = reprlib.Repr()
+
+    class Short(reprlib.Repr):
+        def repr_int(self, x, level):
+            # repr of an integer of more than 4300 digits raises ValueError
+            if x.bit_length() < 4 * SHOWN_LENGTH:
+                return repr(x)
+            return f"<an integer of about {int(x.bit_length() * 0.30103) + 1} digits>"
+
+    r = Short()
     r.maxlevel, r.maxstring, r.maxother = 3, SHOWN_LENGTH, SHOWN_LENGTH
     return r
 

@@ -57,7 +57,10 @@ def number(low=None, high=None, low_open=False, allow_inf=False, why="", floor=N
             v = float(v)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise SceneError(path, f"expected a number, got {_type_name(v)} {shown(v)}")
-        v = float(v)
+        try:
+            v = float(v)
+        except OverflowError:  # an integer beyond any float
+            raise SceneError(path, f"expected a finite number, got {shown(v)}") from None
         if math.isnan(v) or (math.isinf(v) and not allow_inf):
             raise SceneError(path, f"expected a finite number, got {v}")
         if low is not None and (v <= low if low_open else v < low):
@@ -79,9 +82,9 @@ def integer(low=None, high=None, why=""):
         if isinstance(v, bool) or not isinstance(v, int):
             raise SceneError(path, f"expected an integer, got {_type_name(v)} {shown(v)}")
         if low is not None and v < low:
-            raise SceneError(path, f"expected an integer >= {low}, got {v}")
+            raise SceneError(path, f"expected an integer >= {low}, got {shown(v)}")
         if high is not None and v > high:
-            raise SceneError(path, f"expected an integer <= {high}, got {v}"
+            raise SceneError(path, f"expected an integer <= {high}, got {shown(v)}"
                                    + (f" (limit: {why})" if why else ""))
         return v
     parse.describe = ("integer" + (f" >= {low}" if low is not None else "")

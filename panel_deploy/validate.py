@@ -108,6 +108,14 @@ class StrictLoader(yaml.SafeLoader):
         finally:
             self._depth = depth
 
+    def construct_object(self, node, deep=False):
+        try:
+            return super().construct_object(node, deep=deep)
+        except ValueError as e:  # a scalar of the right form but no value: 2001-02-30, 10^5000
+            reason = str(e).split(";")[0].split(": value has")[0]
+            raise yaml.constructor.ConstructorError(
+                None, None, f"cannot read {shown(node.value)} ({reason})", node.start_mark) from None
+
     def construct_mapping(self, node, deep=False):
         if isinstance(node, yaml.MappingNode):
             seen = {}
@@ -291,14 +299,16 @@ def finite_number(value, flag: str, *, low=None, high=None, low_open=False, inte
         return None
     kind = "an integer" if integer else "a number"
     if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-            (integer and not float(value).is_integer()):
+            (integer and not isinstance(value, int) and not float(value).is_integer()):
         raise SceneError(flag, f"expected {kind}, got {shown(value)}")
+    if isinstance(value, int) and abs(value) > 2 ** 1023:  # beyond any float: math would raise
+        raise SceneError(flag, f"expected a finite number, got {shown(value)}")
     if not math.isfinite(value):
         raise SceneError(flag, f"expected a finite number, got {value}")
     if low is not None and (value <= low if low_open else value < low):
-        raise SceneError(flag, f"expected {kind} {'>' if low_open else '>='} {low:g}, got {value:g}")
+        raise SceneError(flag, f"expected {kind} {'>' if low_open else '>='} {low:g}, got {shown(value)}")
     if high is not None and value > high:
-        raise SceneError(flag, f"expected {kind} <= {high:g}, got {value:g}")
+        raise SceneError(flag, f"expected {kind} <= {high:g}, got {shown(value)}")
     return value
 
 

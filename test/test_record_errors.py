@@ -6,9 +6,11 @@ written by rosbags), without velocities, stamped with wall-clock time.
 """
 
 import json
+import time
 from dataclasses import replace
 
 import pytest
+from hostile import mcap_with_chunk
 
 from panel_deploy.cli import main
 from panel_deploy.record import messages as m
@@ -60,6 +62,21 @@ def test_corrupt_chunk(recording, tmp_path, capsys):
     path.write_bytes(bytes(data))
     assert main(["collide", str(path)]) == 2
     _one_line_error(capsys, path, "corrupt")
+
+
+@pytest.mark.parametrize("declared, zeros, expected", [
+    (1 << 30, 1 << 30, "declares 1073741824 bytes uncompressed, above the reader's limit of "
+                       "33554432"),  # 1 GiB of zeros: 33 kB compressed
+    (1000, 1 << 24, "declares 1000 bytes uncompressed but holds more"),  # the frame is not trusted
+    (1000, 10, "declares 1000 bytes uncompressed but holds 10"),
+])
+def test_chunk_sizes_are_checked_before_inflating(tmp_path, capsys, declared, zeros, expected):
+    path = tmp_path / "bomb.mcap"
+    path.write_bytes(mcap_with_chunk(declared, zeros))
+    start = time.perf_counter()
+    assert main(["collide", str(path), "--scene", "paper_4x4"]) == 2
+    assert time.perf_counter() - start < 5
+    _one_line_error(capsys, path, "corrupt chunk record at byte 36", expected)
 
 
 def test_truncated_file_is_read_up_to_its_end_and_says_so(recording, tmp_path, capsys):

@@ -216,50 +216,69 @@ def _umask() -> int:
     return mask
 
 
+def in_place(path) -> bool:
+    """Whether ``path`` is a device or a pipe (``/dev/null``, ``/dev/full``, a FIFO),
+    written in place: renaming a file over it would replace the device itself."""
+    path = Path(path)
+    return path.exists() and not path.is_file()
+
+
+def temporary_beside(path, prefix: str, suffix: str) -> tuple[int, str]:
+    """``(fd, name)`` of a new file in ``path``'s folder (``prefix`` + random +
+    ``suffix``), with the mode ``open()`` would give it (mkstemp's is 0600):
+    written there and renamed over ``path`` at the end, it replaces ``path``
+    at once, or not at all."""
+    folder = Path(path).parent if str(Path(path).parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix=prefix, suffix=suffix)
+    os.fchmod(fd, 0o666 & ~_umask())
+    return fd, tmp
+
+
+def _remove(name) -> None:
+    if name is not None and os.path.exists(name):
+        os.unlink(name)
+
+
 def write_atomic(path, write, flag: str = "output", mode: str = "w") -> Path:
     """Write a file atomically: ``write(f)`` on a temporary file in the target
-    folder, renamed over ``path``. No temporary file is left behind. A
-    ``path`` that is a device or a pipe is written in place.
+    folder, renamed over ``path``. No temporary file is left behind, and an
+    existing ``path`` stays as it was unless the write succeeds. A ``path``
+    that is a device or a pipe is written in place.
 
-    If writing fails (disk full, folder removed meanwhile, ...), the same
-    content is written to :func:`fallback_path` and a :class:`PanelDeployError`
-    names ``flag``, the reason and where the content is, so nothing computed is lost.
+    If writing fails (disk full, file size limit, folder removed meanwhile,
+    ...), the same content is written to :func:`fallback_path` and a
+    :class:`PanelDeployError` names ``flag``, the reason and where the content
+    is, so nothing computed is lost; a fallback file that fails too is removed.
     """
     path = Path(path)
     text = {} if "b" in mode else {"encoding": "utf-8"}
-    if path.exists() and not path.is_file():
-        # a device or a pipe (/dev/null, /dev/stdout, a FIFO): renaming a file
-        # over it would replace the device itself, so it is written in place
-        with open(path, mode, **text) as f:
-            write(f)
-        return path
-    folder = path.parent if str(path.parent) else Path(".")
     tmp = None
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".part")
-        # mkstemp makes the file private (0600); the result gets the mode
-        # open() would give it
-        os.fchmod(fd, 0o666 & ~_umask())
+        if in_place(path):
+            with open(path, mode, **text) as f:
+                write(f)
+            return path
+        fd, tmp = temporary_beside(path, f".{path.name}.", ".part")
         with os.fdopen(fd, mode, **text) as f:
             write(f)
         os.replace(tmp, path)
         return path
     except OSError as e:
-        if tmp is not None and os.path.exists(tmp):
-            os.unlink(tmp)
+        _remove(tmp)
         reason = e.strerror or str(e)
+        rescue = None
         try:
             rescue = fallback_path(path)
             with open(rescue, mode, **text) as f:
                 write(f)
         except OSError as e2:
+            _remove(rescue)  # a partial file would look like a result
             raise PanelDeployError(f"{flag}: cannot write {path} ({reason}), nor a fallback "
                                    f"file ({e2.strerror or e2}); the result is lost") from None
         raise PanelDeployError(f"{flag}: cannot write {path} ({reason}); the result is saved "
                                f"in {rescue}") from None
     except BaseException:
-        if tmp is not None and os.path.exists(tmp):
-            os.unlink(tmp)
+        _remove(tmp)
         raise
 
 

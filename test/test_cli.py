@@ -488,3 +488,34 @@ def test_collide_never_prints_a_non_finite_report(capsys, trajectory, monkeypatc
     monkeypatch.setattr(CollisionReport, "to_dict", lambda self, **k: {**real(self, **k), "v": math.nan})
     code, out, err = run(capsys, "collide", str(trajectory), "--json")
     assert code == 1 and out == "" and err.strip() == "panel-deploy: collide: non-finite result: v = nan"
+
+
+@pytest.mark.parametrize("target, limit, expected", [
+    ("/dev/full", None, "--out: cannot write /dev/full (No space left on device); the result is "
+                        "saved in {tmp}/panel-deploy-rescued-full-"),
+    ("old.npz", 20_000, "--out: cannot write old.npz (File too large), nor a fallback file (File "
+                        "too large); the result is lost"),  # ulimit -f
+])
+def test_an_output_that_cannot_be_written_is_one_line(tmp_path, target, limit, expected):
+    import resource
+    import subprocess
+    import sys
+
+    def limited():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    (tmp_path / "old.npz").write_bytes(b"the previous trajectory")
+    cli = str(Path(sys.executable).parent / "panel-deploy")
+    proc = subprocess.run([cli, "simulate", PAPER, "--t-end", "0.3", "--out", target],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path,
+                          preexec_fn=limited if limit else None)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert lines[-1].startswith("panel-deploy: error: " + expected.format(tmp=tmp_path)), lines
+    assert (tmp_path / "old.npz").read_bytes() == b"the previous trajectory"
+    rescued = sorted(set(tmp_path.iterdir()) - {tmp_path / "old.npz"})
+    if limit:  # the fallback failed too: no unreadable partial file is left
+        assert rescued == []
+    else:
+        assert [str(p) for p in rescued] == [lines[-1].rsplit("saved in ", 1)[1]]
+        result, scene, _ = load_trajectory(rescued[0])
+        assert result.t[-1] == pytest.approx(0.3) and scene.name == "paper_4x4"

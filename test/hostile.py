@@ -5,7 +5,7 @@
 * :func:`npy_declaring`: a ``.npy`` member whose header declares a shape its
   data does not hold; :func:`npz_with` puts it into a copy of an ``.npz``.
 * :func:`mcap_with_chunk`: an MCAP file whose one chunk declares an
-  uncompressed size, holding zstd-compressed zeros of another size.
+  uncompressed size, holding compressed zeros of another size.
 """
 
 from __future__ import annotations
@@ -51,12 +51,22 @@ def npz_with(npz: bytes, name: str, member: bytes) -> bytes:
     return out.getvalue()
 
 
-def mcap_with_chunk(declared: int, zeros: int) -> bytes:
-    """Magic, header and one zstd chunk of ``zeros`` zero bytes declaring ``declared`` bytes
-    (CRC 0: none to check); no footer."""
-    raw = bytes(zeros)
-    packed = zstandard.ZstdCompressor().compress(raw)
-    body = (struct.pack("<QQQI", 0, 0, declared, 0) + mcap_file._str("zstd")
+def mcap_with_chunk(declared: int, zeros: int, compression: str = "zstd") -> bytes:
+    """Magic, header and one chunk of ``zeros`` zero bytes compressed with
+    ``compression`` (zstd or lz4) declaring ``declared`` bytes (CRC 0: none to
+    check); no footer."""
+    block = bytes(min(zeros, 1 << 20))  # compressed piece by piece: 1 GiB is never in memory
+    if compression == "zstd":
+        compressor = zstandard.ZstdCompressor().compressobj()
+        parts = []
+    else:
+        import lz4.frame
+        compressor = lz4.frame.LZ4FrameCompressor()
+        parts = [compressor.begin()]
+    for start in range(0, zeros, len(block) or 1):
+        parts.append(compressor.compress(block[:zeros - start]))
+    packed = b"".join(parts) + compressor.flush()
+    body = (struct.pack("<QQQI", 0, 0, declared, 0) + mcap_file._str(compression)
             + struct.pack("<Q", len(packed)) + packed)
     return (mcap_file.MAGIC + mcap_file._record(mcap_file.HEADER, mcap_file._str("ros2")
                                                 + mcap_file._str("hostile"))

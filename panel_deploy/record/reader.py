@@ -212,16 +212,24 @@ def _parse(opcode: int, body, length: int) -> list:
 
 
 def _bounded(chunk: Chunk) -> Chunk:
-    """``chunk`` with its zstd data decompressed, refused if it declares or
-    holds more than :data:`MAX_CHUNK_BYTES` (the zstd frame's own size field
-    is not trusted either: never more than the declared size is inflated)."""
+    """``chunk`` with its data decompressed, refused if it declares or holds
+    more than :data:`MAX_CHUNK_BYTES` (the compressed frame's own size field is
+    not trusted either: never more than the declared size is inflated)."""
     if chunk.uncompressed_size > MAX_CHUNK_BYTES:
         raise ValueError(f"it declares {chunk.uncompressed_size} bytes uncompressed, above "
                          f"the reader's limit of {MAX_CHUNK_BYTES}")
-    if chunk.compression != "zstd":
+    if chunk.compression == "zstd":
+        with zstandard.ZstdDecompressor().stream_reader(chunk.data) as stream:
+            data = stream.read(chunk.uncompressed_size + 1)
+    elif chunk.compression == "lz4":
+        try:
+            import lz4.frame
+        except ImportError:  # mcap's optional codec: breakup_chunk reports it missing
+            return chunk
+        data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data,
+                                                          max_length=chunk.uncompressed_size + 1)
+    else:
         return chunk
-    with zstandard.ZstdDecompressor().stream_reader(chunk.data) as stream:
-        data = stream.read(chunk.uncompressed_size + 1)
     if len(data) != chunk.uncompressed_size:
         raise ValueError(f"it declares {chunk.uncompressed_size} bytes uncompressed but "
                          f"holds {'more' if len(data) > chunk.uncompressed_size else len(data)}")

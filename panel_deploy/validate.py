@@ -5,9 +5,12 @@
   aliases that expand the document beyond :data:`MAX_YAML_EXPANDED`.
 * :func:`check_output_path`: an output path is checked before any work is
   done (its folder exists and is writable, the path is not a folder).
-* :func:`write_atomic`: write through a temporary file renamed into place;
-  if the write fails after all, the content goes to a fallback file in the
-  working directory (or the temporary folder) and the error says where.
+* :func:`write_atomic`: write through a temporary file renamed into place
+  (:func:`temporary_beside`; a device or pipe, :func:`in_place`, is written
+  as it is); if the write fails after all (a full disk, ``/dev/full``, a file
+  size limit), the content goes to a fallback file in the working directory
+  (or the temporary folder) and the error says where; a fallback that fails
+  too is removed.
 * :func:`read_text`: a text file read with every failure a one-line error.
 * :func:`check_finite`: an array with NaN or inf refused naming the array and
   the first bad index.

@@ -84,12 +84,12 @@ def _same_file(output, other) -> bool:
     output, other = Path(output), Path(other)
     if str(output) == str(other):
         return True
-    if output.exists() and not output.is_file():
-        return False
     try:
+        if output.exists() and not output.is_file():
+            return False
         return output.resolve() == other.resolve() or (
             output.exists() and other.exists() and os.path.samefile(output, other))
-    except (OSError, RuntimeError):  # a loop of links, a path too long: no file to destroy
+    except (OSError, RuntimeError, ValueError):  # a loop of links, a name too long, a NUL byte
         return False
 
 

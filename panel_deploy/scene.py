@@ -534,7 +534,7 @@ def apply_overrides(data, overrides) -> dict:
         try:
             value = load_yaml(text)
         except yaml.YAMLError as e:
-            raise SceneError(f"--set {key}", f"value {text!r} is not valid YAML "
+            raise SceneError(f"--set {key}", f"value {shown(text)} is not valid YAML "
                                              f"({yaml_problem(e)})") from None
         *parents, last = key.split(".")
         node = data

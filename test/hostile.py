@@ -6,11 +6,13 @@
   data does not hold; :func:`npz_with` puts it into a copy of an ``.npz``.
 * :func:`mcap_with_chunk`: an MCAP file whose one chunk declares an
   uncompressed size, holding compressed zeros of another size.
+* :func:`file_size_limit`: a child process's ``ulimit -f``.
 """
 
 from __future__ import annotations
 
 import io
+import resource
 import struct
 import zipfile
 
@@ -72,3 +74,11 @@ def mcap_with_chunk(declared: int, zeros: int, compression: str = "zstd") -> byt
                                                 + mcap_file._str("hostile"))
             + mcap_file._record(mcap_file.CHUNK, body))
 
+
+
+def file_size_limit(limit):
+    """``preexec_fn`` of a child whose files may not grow beyond ``limit`` bytes
+    (``ulimit -f``; Python ignores SIGXFSZ, so a write past it fails with EFBIG)."""
+    if limit is None:
+        return None
+    return lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hostile import alias_bomb, alias_flow, npy_declaring, npz_with
+from hostile import alias_bomb, alias_flow, file_size_limit, npy_declaring, npz_with
 
 from panel_deploy.cli import main
 from panel_deploy.trajectory_io import load_trajectory
@@ -497,17 +497,14 @@ def test_collide_never_prints_a_non_finite_report(capsys, trajectory, monkeypatc
                         "too large); the result is lost"),  # ulimit -f
 ])
 def test_an_output_that_cannot_be_written_is_one_line(tmp_path, target, limit, expected):
-    import resource
     import subprocess
     import sys
 
-    def limited():
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
     (tmp_path / "old.npz").write_bytes(b"the previous trajectory")
     cli = str(Path(sys.executable).parent / "panel-deploy")
     proc = subprocess.run([cli, "simulate", PAPER, "--t-end", "0.3", "--out", target],
                           capture_output=True, text=True, timeout=300, cwd=tmp_path,
-                          preexec_fn=limited if limit else None)
+                          preexec_fn=file_size_limit(limit))
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert lines[-1].startswith("panel-deploy: error: " + expected.format(tmp=tmp_path)), lines

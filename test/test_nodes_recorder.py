@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hostile import file_size_limit
 from rclpy.serialization import deserialize_message
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
@@ -100,14 +101,11 @@ def test_unwritable_record_path_is_one_line(tmp_path, target):
 
 
 def test_a_recording_that_fills_the_disk_stops_and_the_run_goes_on(tmp_path, compiled_nodes):
-    import resource
-
-    def limited():  # ulimit -f: the recording outgrows it mid-run
-        resource.setrlimit(resource.RLIMIT_FSIZE, (50_000, 50_000))
     (tmp_path / "x.mcap").write_bytes(b"the previous recording")
     proc = subprocess.run([CLI, "run", "paper_4x4", "--real-time-factor", "0", "--json", "--record",
                            "x.mcap", "--set", f"simulation.t_end={T_END}"], cwd=tmp_path,
-                          preexec_fn=limited, capture_output=True, text=True, timeout=300)
+                          preexec_fn=file_size_limit(50_000),  # outgrown mid-run
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     # the run's answer is kept (last line: Fast DDS complains on stdout that the limit
     # also stops its shared-memory segments)

@@ -6,7 +6,6 @@ written by rosbags), without velocities, stamped with wall-clock time.
 """
 
 import json
-import resource
 import subprocess
 import sys
 import time
@@ -14,7 +13,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from hostile import mcap_with_chunk
+from hostile import file_size_limit, mcap_with_chunk
 
 from panel_deploy.cli import main
 from panel_deploy.record import messages as m
@@ -185,11 +184,6 @@ def test_collide_on_an_encoder_recording_from_ros2_bag_record(tmp_path, capsys):
 
 # --- issue 26: a recording replaces its target whole, or not at all ---
 
-def limited(limit):
-    """preexec_fn of a child whose files may not grow beyond ``limit`` bytes (ulimit -f)."""
-    return lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
-
-
 @pytest.mark.parametrize("target, limit", [("/dev/full", None), ("old.mcap", 30_000),
                                            ("new.mcap", 30_000)])
 def test_a_recording_that_cannot_be_written_is_one_line_and_leaves_the_target(
@@ -198,7 +192,7 @@ def test_a_recording_that_cannot_be_written_is_one_line_and_leaves_the_target(
     old.write_bytes(b"the previous recording")
     proc = subprocess.run([CLI, "simulate", "paper_4x4", "--t-end", "0.5", "--record", target],
                           capture_output=True, text=True, timeout=300, cwd=tmp_path,
-                          preexec_fn=limited(limit) if limit else None)
+                          preexec_fn=file_size_limit(limit))
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     reason = "File too large" if limit else "No space left on device"

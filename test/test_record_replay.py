@@ -10,6 +10,7 @@ from collections import defaultdict
 
 import numpy as np
 import pytest
+from hostile import file_size_limit
 
 from panel_deploy.build import build_model
 from panel_deploy.cli import main
@@ -93,14 +94,10 @@ def test_png_instant_outside_the_recording(recording, tmp_path, capsys):
                         "large); the result is lost"),  # ulimit -f: rerun's file sink hung here
 ])
 def test_an_rrd_that_cannot_be_written_is_one_line(recording, tmp_path, target, limit, expected):
-    import resource
-
-    def limited():
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
     (tmp_path / "old.rrd").write_bytes(b"the previous replay")
     cli = os.path.join(os.path.dirname(sys.executable), "panel-deploy")
     proc = subprocess.run([cli, "replay", str(recording), "--save", target], cwd=tmp_path,
-                          preexec_fn=limited if limit else None, capture_output=True, text=True,
+                          preexec_fn=file_size_limit(limit), capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 2 and proc.stderr.startswith("panel-deploy: error: --save: " + expected)
     assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr

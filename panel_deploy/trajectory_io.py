@@ -121,12 +121,20 @@ def load_trajectory(path):
     return result, scene, data["stiffness"]
 
 
+#: Bytes per body and sample of a trajectory, with room: pose, velocities
+#: (144 bytes) and the hinge angles, rates and closure values that go with a body.
+_BYTES_PER_BODY_SAMPLE = 256
+
+
 def _check_declared_sizes(path):
     """Refuse a member whose ``.npy`` header declares more data than the member
-    holds, or more samples than a scene can have, before numpy allocates it:
-    a 300-byte header can declare a terabyte."""
-    from .scene import MAX_SAMPLES
+    holds, or more samples than a scene can have, and an archive declaring more
+    than the largest trajectory a scene can ask for, before numpy allocates it:
+    a 300-byte header can declare a terabyte, and 8 GB of zeros deflate to 8 MB."""
+    from .scene import MAX_SAMPLES, MAX_SIDE
 
+    largest = MAX_SAMPLES * MAX_SIDE ** 2 * _BYTES_PER_BODY_SAMPLE
+    total = 0
     with zipfile.ZipFile(path) as archive:
         for info in archive.infolist():
             where = f"{path}: {info.filename}"
@@ -150,6 +158,11 @@ def _check_declared_sizes(path):
             if info.filename[:-len(".npy")] in _ARRAYS and shape and shape[0] > MAX_SAMPLES:
                 raise TrajectoryError(f"{where}: {shape[0]} samples, above the limit of "
                                       f"{MAX_SAMPLES} a scene can ask for")
+            total += declared
+    if total > largest:
+        raise TrajectoryError(f"{path}: its arrays declare {total} bytes, above the {largest} "
+                              f"of the largest trajectory a scene can ask for ({MAX_SAMPLES} "
+                              f"samples of {MAX_SIDE} x {MAX_SIDE} panels)")
 
 
 def _scalar(path, data, name, kind):

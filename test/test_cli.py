@@ -412,6 +412,21 @@ def test_declared_sizes_are_checked_before_reading(capsys, tmp_path, trajectory,
     assert line == f"panel-deploy: error: {bad}: {expected}" or expected in line, line
 
 
+def test_an_archive_declaring_more_than_any_trajectory_is_refused(capsys, tmp_path, trajectory,
+                                                                 monkeypatch):
+    # zeros deflate a thousand fold: 2 GB held in 2 MB; here the limit is scaled down
+    from panel_deploy import trajectory_io
+    monkeypatch.setattr(trajectory_io, "_BYTES_PER_BODY_SAMPLE", 1)
+    bad = tmp_path / "big.npz"
+    bad.write_bytes(npz_with(trajectory.read_bytes(), "closure_sigma_min.npy",
+                             npy_declaring((10, 10**5), bytes(8 * 10**6))))
+    assert bad.stat().st_size < trajectory.stat().st_size + 20_000
+    line = one_line_error(capsys, ["collide", str(bad)])
+    assert line.startswith(f"panel-deploy: error: {bad}: its arrays declare 87"), line
+    assert line.endswith("above the 7200000 of the largest trajectory a scene can ask for (50000 "
+                         "samples of 12 x 12 panels)"), line
+
+
 def test_corrupt_compressed_data_is_one_line(capsys, tmp_path, trajectory):
     data = bytearray(trajectory.read_bytes())
     i = data.index(b"theta.npy") + 200  # inside theta's deflated data

@@ -214,10 +214,11 @@ def _parse(opcode: int, body, length: int) -> list:
 def _bounded(chunk: Chunk) -> Chunk:
     """``chunk`` with its data decompressed, refused if it declares or holds
     more than :data:`MAX_CHUNK_BYTES` (the compressed frame's own size field is
-    not trusted either: never more than the declared size is inflated)."""
+    not trusted either: never more than the declared size is inflated). The
+    caller names the file and the record's position."""
     if chunk.uncompressed_size > MAX_CHUNK_BYTES:
-        raise ValueError(f"it declares {chunk.uncompressed_size} bytes uncompressed, above "
-                         f"the reader's limit of {MAX_CHUNK_BYTES}")
+        raise TrajectoryError(f"it declares {chunk.uncompressed_size} bytes uncompressed, "
+                              f"above the reader's limit of {MAX_CHUNK_BYTES}")
     if chunk.compression == "zstd":
         with zstandard.ZstdDecompressor().stream_reader(chunk.data) as stream:
             data = stream.read(chunk.uncompressed_size + 1)
@@ -231,8 +232,9 @@ def _bounded(chunk: Chunk) -> Chunk:
     else:
         return chunk
     if len(data) != chunk.uncompressed_size:
-        raise ValueError(f"it declares {chunk.uncompressed_size} bytes uncompressed but "
-                         f"holds {'more' if len(data) > chunk.uncompressed_size else len(data)}")
+        held = "more" if len(data) > chunk.uncompressed_size else len(data)
+        raise TrajectoryError(f"it declares {chunk.uncompressed_size} bytes uncompressed but "
+                              f"holds {held}")
     return replace(chunk, compression="", data=data)
 
 

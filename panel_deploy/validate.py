@@ -70,7 +70,7 @@ class StrictLoader(yaml.SafeLoader):
         """
         known = memo.get(id(node))
         if known is None:
-            if depth > self.max_depth:
+            if depth >= self.max_depth:
                 raise yaml.composer.ComposerError(
                     None, None, f"aliases nest it deeper than {self.max_depth} levels (the limit "
                                 "of a scene file)", node.start_mark)
@@ -90,7 +90,7 @@ class StrictLoader(yaml.SafeLoader):
                             node.start_mark)
                 known = (size, height)
             memo[id(node)] = known
-        if depth + known[1] > self.max_depth:
+        if depth + known[1] >= self.max_depth:
             raise yaml.composer.ComposerError(
                 None, None, f"aliases nest it deeper than {self.max_depth} levels (the limit "
                             "of a scene file)", node.start_mark)

@@ -58,6 +58,14 @@ def main(argv=None) -> int:
             lambda ops: fz.case_trajectory_bytes(ops, trajectory)),
         "trajectory arrays": given(fz.array_names, fz.arrays)(
             lambda name, value: fz.case_trajectory_arrays(name, value, trajectory)),
+        "aliases": given(fz.alias_shapes, fz.alias_places, fz.alias_keys)(
+            lambda shape, where, key: fz.case_aliases(*shape, where, key, trajectory,
+                                                      result_text)),
+        "declared sizes": given(fz.array_names, fz.declared_shapes, st.integers(0, 200))(
+            lambda name, shape, held: fz.case_declared_size(name, shape, held, trajectory)),
+        "chunk sizes": given(fz.chunk_sizes, st.integers(0, 2**20))(fz.case_chunk_size),
+        "same path": given(st.sampled_from(sorted(fz.SAME_PATH)), st.sampled_from(fz.PATH_FORMS))(
+            fz.case_same_path),
     }
     broken = []
     start = time.perf_counter()

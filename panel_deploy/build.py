@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import fold
-from .errors import DesignError, SceneError
+from .errors import DesignError, SceneError, shown
 from .model import Body, ClosureParameters, Hinge, Model, box_inertia
 from .scene import Scene
 
@@ -204,10 +204,10 @@ def _hinge_groups(scene, design, hinges, ground_cells):
         group = []
         for name in names:
             if name not in index:
-                raise SceneError(f"hinges.groups[{gi}]", f"no such hinge {name!r} "
+                raise SceneError(f"hinges.groups[{gi}]", f"no such hinge {shown(name)} "
                                  f"(hinges are: {', '.join(sorted(index))})")
             if name in seen:
-                raise SceneError(f"hinges.groups[{gi}]", f"hinge {name!r} is in two groups")
+                raise SceneError(f"hinges.groups[{gi}]", f"hinge {shown(name)} is in two groups")
             seen.add(name)
             group.append(index[name])
         groups.append(tuple(sorted(group)))

@@ -36,3 +36,34 @@ class TrajectoryError(PanelDeployError, ValueError):
 
 class OptimisationError(PanelDeployError, ValueError):
     """An optimisation request is invalid (bounds, groups, start point, cluster)."""
+
+
+#: Longest shown value in a message: a value read from a file or a message can
+#: be any size (YAML aliases expand a small file a million fold), and one line
+#: must stay one readable line.
+SHOWN_LENGTH = 80
+
+
+def _short_repr():
+    import reprlib
+
+    class Short(reprlib.Repr):
+        def repr_int(self, x, level):
+            # repr of an integer of more than 4300 digits raises ValueError
+            if x.bit_length() < 4 * SHOWN_LENGTH:
+                return repr(x)
+            return f"<an integer of about {int(x.bit_length() * 0.30103) + 1} digits>"
+
+    r = Short()
+    r.maxlevel, r.maxstring, r.maxother = 3, SHOWN_LENGTH, SHOWN_LENGTH
+    return r
+
+
+_REPR = _short_repr()
+
+
+def shown(value) -> str:
+    """``repr(value)`` for an error message, at most :data:`SHOWN_LENGTH` characters
+    (longer ones end in ``...``); only the part shown is ever formatted."""
+    text = _REPR.repr(value)
+    return text if len(text) <= SHOWN_LENGTH else text[:SHOWN_LENGTH - 3] + "..."

@@ -24,9 +24,10 @@ from .dynamics import simulate_segments
 from .dynamics.report import hinge_states
 from .dynamics.pack import pack
 from .dynamics.result import SimulationResult, concatenate
-from .errors import SceneError
+from .errors import SceneError, shown
 from .model import Model
 from .scene import INTEGRATORS, Scene, scene_from_dict
+from .validate import load_yaml, yaml_problem
 
 #: Samples per integrator block: 50 ms of simulated time at 200 Hz, small
 #: enough that the first message leaves within milliseconds of the request.
@@ -73,23 +74,23 @@ class DynamicsParameters:
         if any(not (isinstance(k, (int, float)) and math.isfinite(k) and k >= 0)
                for k in self.stiffness):
             raise SceneError("stiffness", f"expected finite numbers >= 0 N m/rad, got "
-                                          f"{list(self.stiffness)}")
+                                          f"{shown(list(self.stiffness))}")
         for name, low in (("damping_ratio", None), ("rtol", 0.0), ("t_end", 0.0),
                           ("rate_hz", 0.0), ("real_time_factor", 0.0)):
             v = getattr(self, name)
             if not math.isfinite(v) or (low is not None and v < low):
-                raise SceneError(name, f"expected a finite number >= {low:g}, got {v!r}"
-                                 if low is not None else f"expected a finite number, got {v!r}")
+                raise SceneError(name, f"expected a finite number >= {low:g}, got {shown(v)}"
+                                 if low is not None else f"expected a finite number, got {shown(v)}")
         if not self.rate_hz > 0:
-            raise SceneError("rate_hz", f"expected a number > 0, got {self.rate_hz!r}")
+            raise SceneError("rate_hz", f"expected a number > 0, got {shown(self.rate_hz)}")
         if self.method and self.method not in INTEGRATORS:
             raise SceneError("method", f"expected one of {', '.join(INTEGRATORS)} (or empty for "
-                                       f"the scene's), got {self.method!r}")
+                                       f"the scene's), got {shown(self.method)}")
         if self.closure not in ("", "penalty", "exact"):
             raise SceneError("closure", f"expected penalty or exact (or empty for the scene's), "
-                                        f"got {self.closure!r}")
+                                        f"got {shown(self.closure)}")
         if self.rtol >= 1:
-            raise SceneError("rtol", f"expected a relative tolerance below 1, got {self.rtol!r}")
+            raise SceneError("rtol", f"expected a relative tolerance below 1, got {shown(self.rtol)}")
 
 
 def apply_stiffness(model: Model, stiffness, damping_ratio: float | None = None) -> Model:
@@ -180,9 +181,9 @@ def scene_from_yaml(text: str, source: str = "/panel_deploy/model") -> Scene:
         Text that is not YAML, or not a valid scene.
     """
     try:
-        data = yaml.safe_load(text)
+        data = load_yaml(text)
     except yaml.YAMLError as e:
-        raise SceneError(source, f"not valid YAML ({str(e).splitlines()[0]})") from None
+        raise SceneError(source, f"not valid YAML ({yaml_problem(e)})") from None
     return scene_from_dict(data, source=source)
 
 

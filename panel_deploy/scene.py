@@ -19,7 +19,7 @@ from typing import Any
 
 import yaml
 
-from .errors import SceneError
+from .errors import SceneError, shown
 
 #: ``simulation.method`` names: the integrators of
 #: :data:`panel_deploy.dynamics.integrate.METHODS` (a test keeps the two equal).
@@ -56,8 +56,11 @@ def number(low=None, high=None, low_open=False, allow_inf=False, why="", floor=N
         if isinstance(v, str) and _YAML12_FLOAT.match(v.strip()):
             v = float(v)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise SceneError(path, f"expected a number, got {_type_name(v)} {v!r}")
-        v = float(v)
+            raise SceneError(path, f"expected a number, got {_type_name(v)} {shown(v)}")
+        try:
+            v = float(v)
+        except OverflowError:  # an integer beyond any float
+            raise SceneError(path, f"expected a finite number, got {shown(v)}") from None
         if math.isnan(v) or (math.isinf(v) and not allow_inf):
             raise SceneError(path, f"expected a finite number, got {v}")
         if low is not None and (v <= low if low_open else v < low):
@@ -77,11 +80,11 @@ def number(low=None, high=None, low_open=False, allow_inf=False, why="", floor=N
 def integer(low=None, high=None, why=""):
     def parse(v, path):
         if isinstance(v, bool) or not isinstance(v, int):
-            raise SceneError(path, f"expected an integer, got {_type_name(v)} {v!r}")
+            raise SceneError(path, f"expected an integer, got {_type_name(v)} {shown(v)}")
         if low is not None and v < low:
-            raise SceneError(path, f"expected an integer >= {low}, got {v}")
+            raise SceneError(path, f"expected an integer >= {low}, got {shown(v)}")
         if high is not None and v > high:
-            raise SceneError(path, f"expected an integer <= {high}, got {v}"
+            raise SceneError(path, f"expected an integer <= {high}, got {shown(v)}"
                                    + (f" (limit: {why})" if why else ""))
         return v
     parse.describe = ("integer" + (f" >= {low}" if low is not None else "")
@@ -91,7 +94,7 @@ def integer(low=None, high=None, why=""):
 
 def boolean(v, path):
     if not isinstance(v, bool):
-        raise SceneError(path, f"expected true or false, got {_type_name(v)} {v!r}")
+        raise SceneError(path, f"expected true or false, got {_type_name(v)} {shown(v)}")
     return v
 
 
@@ -101,7 +104,7 @@ boolean.describe = "true/false"
 def choice(*options):
     def parse(v, path):
         if v not in options:
-            raise SceneError(path, f"expected one of {', '.join(map(str, options))}, got {v!r}")
+            raise SceneError(path, f"expected one of {', '.join(map(str, options))}, got {shown(v)}")
         return v
     parse.describe = " | ".join(options)
     return parse
@@ -109,7 +112,7 @@ def choice(*options):
 
 def vector3(v, path):
     if not isinstance(v, (list, tuple)) or len(v) != 3:
-        raise SceneError(path, f"expected a list of 3 numbers, got {v!r}")
+        raise SceneError(path, f"expected a list of 3 numbers, got {shown(v)}")
     return tuple(number()(x, f"{path}[{i}]") for i, x in enumerate(v))
 
 
@@ -121,7 +124,7 @@ _SIZE = number(0, 1e3, low_open=True, floor=1e-6, why=_WHY_SCALE)
 def cell(v, path):
     if (not isinstance(v, (list, tuple)) or len(v) != 2
             or not all(isinstance(x, int) and not isinstance(x, bool) and x >= 1 for x in v)):
-        raise SceneError(path, f"expected a cell [row, col] of integers >= 1, got {v!r}")
+        raise SceneError(path, f"expected a cell [row, col] of integers >= 1, got {shown(v)}")
     return (v[0], v[1])
 
 
@@ -130,17 +133,17 @@ cell.describe = "[row, col]"
 
 def cell_list(v, path):
     if not isinstance(v, (list, tuple)):
-        raise SceneError(path, f"expected a list of cells [row, col], got {v!r}")
+        raise SceneError(path, f"expected a list of cells [row, col], got {shown(v)}")
     return tuple(cell(x, f"{path}[{i}]") for i, x in enumerate(v))
 
 
 def cell_pairs(v, path):
     if not isinstance(v, (list, tuple)):
-        raise SceneError(path, f"expected a list of cell pairs [[r, c], [r, c]], got {v!r}")
+        raise SceneError(path, f"expected a list of cell pairs [[r, c], [r, c]], got {shown(v)}")
     out = []
     for i, pair in enumerate(v):
         if not isinstance(pair, (list, tuple)) or len(pair) != 2:
-            raise SceneError(f"{path}[{i}]", f"expected a pair of cells, got {pair!r}")
+            raise SceneError(f"{path}[{i}]", f"expected a pair of cells, got {shown(pair)}")
         out.append(tuple(sorted(cell(c, f"{path}[{i}][{j}]") for j, c in enumerate(pair))))
     return tuple(out)
 
@@ -154,7 +157,7 @@ def one_of(*parsers, describe):
                 return p(v, path)
             except SceneError as e:
                 err = e
-        raise SceneError(path, f"expected {describe}, got {v!r}") from err
+        raise SceneError(path, f"expected {describe}, got {shown(v)}") from err
     parse.describe = describe
     return parse
 
@@ -168,7 +171,7 @@ def optional(parser):
 
 def hinge_stiffness_map(v, path):
     if not isinstance(v, dict):
-        raise SceneError(path, f"expected a mapping hinge name -> stiffness, got {v!r}")
+        raise SceneError(path, f"expected a mapping hinge name -> stiffness, got {shown(v)}")
     return {str(k): number(0.0, 1e4, why=_WHY_STIFF)(x, f"{path}.{k}") for k, x in v.items()}
 
 
@@ -179,7 +182,7 @@ def groups(v, path):
     if v in ("auto", "none"):
         return v
     if not isinstance(v, list) or not all(isinstance(g, list) for g in v):
-        raise SceneError(path, f"expected auto, none or a list of lists of hinge names, got {v!r}")
+        raise SceneError(path, f"expected auto, none or a list of lists of hinge names, got {shown(v)}")
     for i, g in enumerate(v):
         if not g:
             raise SceneError(f"{path}[{i}]", "a group needs at least one hinge")
@@ -296,7 +299,7 @@ class CollisionSection:
 
 def _bounds(v, path):
     if not isinstance(v, (list, tuple)) or len(v) != 2:
-        raise SceneError(path, f"expected [lower, upper], got {v!r}")
+        raise SceneError(path, f"expected [lower, upper], got {shown(v)}")
     lo, hi = (number(0.0)(x, f"{path}[{i}]") for i, x in enumerate(v))
     if lo > hi:
         raise SceneError(path, f"lower bound {lo:g} is above upper bound {hi:g}")
@@ -371,7 +374,7 @@ def _parse_section(cls, data, path):
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise SceneError(path, f"expected a mapping, got {_type_name(data)} {data!r}")
+        raise SceneError(path, f"expected a mapping, got {_type_name(data)} {shown(data)}")
     known = {f.name: f for f in fields(cls)}
     for key in data:
         if key not in known:
@@ -531,7 +534,7 @@ def apply_overrides(data, overrides) -> dict:
         try:
             value = load_yaml(text)
         except yaml.YAMLError as e:
-            raise SceneError(f"--set {key}", f"value {text!r} is not valid YAML "
+            raise SceneError(f"--set {key}", f"value {shown(text)} is not valid YAML "
                                              f"({yaml_problem(e)})") from None
         *parents, last = key.split(".")
         node = data

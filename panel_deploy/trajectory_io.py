@@ -16,6 +16,7 @@ N m/rad, as simulated), ``hinge_names``, ``body_names``, and the run's
 
 from __future__ import annotations
 
+import math
 import zipfile
 import zlib
 from pathlib import Path
@@ -24,7 +25,7 @@ import numpy as np
 import yaml
 
 from .dynamics.result import PER_SAMPLE, SimulationResult, Status
-from .errors import SceneError, TrajectoryError
+from .errors import SceneError, TrajectoryError, shown
 from .validate import load_yaml, yaml_problem
 
 FORMAT_VERSION = 2
@@ -82,8 +83,11 @@ def load_trajectory(path):
     if path.is_dir():
         raise TrajectoryError(f"{path}: is a folder, not a trajectory file")
     try:
+        _check_declared_sizes(path)
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
+    except TrajectoryError:
+        raise
     except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, KeyError,
             NotImplementedError, RuntimeError, UnicodeDecodeError) as e:
         reason = str(e).splitlines()[0] if str(e) else type(e).__name__
@@ -115,6 +119,50 @@ def load_trajectory(path):
         raise TrajectoryError(f"{path}: success {run['success']} contradicts status {status}")
     result = SimulationResult(**{k: data[k] for k in _ARRAYS}, energy=energy, **run)
     return result, scene, data["stiffness"]
+
+
+#: Bytes per body and sample of a trajectory, with room: pose, velocities
+#: (144 bytes) and the hinge angles, rates and closure values that go with a body.
+_BYTES_PER_BODY_SAMPLE = 256
+
+
+def _check_declared_sizes(path):
+    """Refuse a member whose ``.npy`` header declares more data than the member
+    holds, or more samples than a scene can have, and an archive declaring more
+    than the largest trajectory a scene can ask for, before numpy allocates it:
+    a 300-byte header can declare a terabyte, and 8 GB of zeros deflate to 8 MB."""
+    from .scene import MAX_SAMPLES, MAX_SIDE
+
+    largest = MAX_SAMPLES * MAX_SIDE ** 2 * _BYTES_PER_BODY_SAMPLE
+    total = 0
+    with zipfile.ZipFile(path) as archive:
+        for info in archive.infolist():
+            where = f"{path}: {info.filename}"
+            if not info.filename.endswith(".npy"):
+                raise TrajectoryError(f"{where}: not an array (a trajectory file holds only "
+                                      ".npy members)")
+            with archive.open(info) as f:
+                version = np.lib.format.read_magic(f)
+                if version not in ((1, 0), (2, 0)):
+                    raise TrajectoryError(f"{where}: .npy format version {version} is not "
+                                          "one numpy.savez writes for these arrays")
+                read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                               else np.lib.format.read_array_header_2_0)
+                shape, _, dtype = read_header(f)
+                declared = math.prod(shape) * dtype.itemsize
+                held = info.file_size - f.tell()
+            if declared > held:
+                raise TrajectoryError(f"{where}: its header declares shape {shown(shape)} of "
+                                      f"{dtype} ({declared} bytes), but the member holds "
+                                      f"{held} bytes")
+            if info.filename[:-len(".npy")] in _ARRAYS and shape and shape[0] > MAX_SAMPLES:
+                raise TrajectoryError(f"{where}: {shape[0]} samples, above the limit of "
+                                      f"{MAX_SAMPLES} a scene can ask for")
+            total += declared
+    if total > largest:
+        raise TrajectoryError(f"{path}: its arrays declare {total} bytes, above the {largest} "
+                              f"of the largest trajectory a scene can ask for ({MAX_SAMPLES} "
+                              f"samples of {MAX_SIDE} x {MAX_SIDE} panels)")
 
 
 def _scalar(path, data, name, kind):

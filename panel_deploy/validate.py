@@ -1,12 +1,16 @@
 """Shared input and output checks (ROS-free): the CLI and the nodes use the same rules.
 
 * :func:`load_yaml`: YAML read by :class:`StrictLoader`, which refuses a key
-  given twice in one mapping and nesting deeper than :data:`MAX_YAML_DEPTH`.
+  given twice in one mapping, nesting deeper than :data:`MAX_YAML_DEPTH` and
+  aliases that expand the document beyond :data:`MAX_YAML_EXPANDED`.
 * :func:`check_output_path`: an output path is checked before any work is
   done (its folder exists and is writable, the path is not a folder).
-* :func:`write_atomic`: write through a temporary file renamed into place;
-  if the write fails after all, the content goes to a fallback file in the
-  working directory (or the temporary folder) and the error says where.
+* :func:`write_atomic`: write through a temporary file renamed into place
+  (:func:`temporary_beside`; a device or pipe, :func:`in_place`, is written
+  as it is); if the write fails after all (a full disk, ``/dev/full``, a file
+  size limit), the content goes to a fallback file in the working directory
+  (or the temporary folder) and the error says where; a fallback that fails
+  too is removed.
 * :func:`read_text`: a text file read with every failure a one-line error.
 * :func:`check_finite`: an array with NaN or inf refused naming the array and
   the first bad index.
@@ -25,24 +29,76 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .errors import PanelDeployError, SceneError
+from .errors import PanelDeployError, SceneError, shown
 
 #: Deepest nesting of YAML collections accepted: a scene is four levels deep
 #: (section, key, list, pair); anything far deeper is a mistake or an attack
 #: (and would exhaust Python's recursion limit).
 MAX_YAML_DEPTH = 32
+#: Largest size (nodes plus scalar characters: about the length of the text)
+#: a document's aliases may expand it to. A scene or result file is a few kB;
+#: without this bound nine lines of anchors and aliases (billion laughs) expand
+#: to 10^9 values, and anything that walks or prints them takes gigabytes.
+MAX_YAML_EXPANDED = 1_000_000
 
 
 class StrictLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` refusing duplicate keys and nesting beyond :data:`MAX_YAML_DEPTH`.
+    """``yaml.SafeLoader`` refusing duplicate keys, nesting beyond :data:`MAX_YAML_DEPTH`
+    and aliases expanding the document beyond :data:`MAX_YAML_EXPANDED`.
 
     A repeated key (``simulation:`` twice) would otherwise keep the last
-    value silently and drop the first.
+    value silently and drop the first. Aliases (and merge keys) stay allowed
+    within the bound: the depth and size of a document that has any are
+    measured on what they expand to, since that is what consumers walk.
     """
 
     max_depth = MAX_YAML_DEPTH
+    max_expanded = MAX_YAML_EXPANDED
+
+    def compose_document(self):
+        self._aliased = False
+        node = super().compose_document()
+        if self._aliased:
+            self._expanded(node, 0, {})
+        return node
+
+    def _expanded(self, node, depth, memo) -> tuple:
+        """``(size, height)`` of ``node`` with its aliases written out; raises past the bounds.
+
+        Memoised per node, so a bomb costs its number of distinct nodes; a
+        recursive alias never ends and so fails the depth bound.
+        """
+        known = memo.get(id(node))
+        if known is None:
+            if depth >= self.max_depth:
+                raise yaml.composer.ComposerError(
+                    None, None, f"aliases nest it deeper than {self.max_depth} levels (the limit "
+                                "of a scene file)", node.start_mark)
+            if isinstance(node, yaml.ScalarNode):
+                known = (1 + len(node.value), 0)
+            else:
+                children = (node.value if isinstance(node, yaml.SequenceNode)
+                            else [n for pair in node.value for n in pair])
+                size, height = 1, 0
+                for child in children:
+                    s, h = self._expanded(child, depth + 1, memo)
+                    size, height = size + s, max(height, h + 1)
+                    if size > self.max_expanded:
+                        raise yaml.composer.ComposerError(
+                            None, None, f"aliases expand it beyond {self.max_expanded} values "
+                                        "and characters (the limit of a scene file)",
+                            node.start_mark)
+                known = (size, height)
+            memo[id(node)] = known
+        if depth + known[1] >= self.max_depth:
+            raise yaml.composer.ComposerError(
+                None, None, f"aliases nest it deeper than {self.max_depth} levels (the limit "
+                            "of a scene file)", node.start_mark)
+        return known
 
     def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            self._aliased = True
         depth = getattr(self, "_depth", 0)
         if depth >= self.max_depth:
             mark = self.peek_event().start_mark
@@ -54,6 +110,14 @@ class StrictLoader(yaml.SafeLoader):
             return super().compose_node(parent, index)
         finally:
             self._depth = depth
+
+    def construct_object(self, node, deep=False):
+        try:
+            return super().construct_object(node, deep=deep)
+        except ValueError as e:  # a scalar of the right form but no value: 2001-02-30, 10^5000
+            reason = str(e).split(";")[0].split(": value has")[0]
+            raise yaml.constructor.ConstructorError(
+                None, None, f"cannot read {shown(node.value)} ({reason})", node.start_mark) from None
 
     def construct_mapping(self, node, deep=False):
         if isinstance(node, yaml.MappingNode):
@@ -68,7 +132,7 @@ class StrictLoader(yaml.SafeLoader):
                     continue  # the base class reports an unhashable key
                 if key in seen:
                     raise yaml.constructor.ConstructorError(
-                        None, None, f"duplicate key {key!r} (first given at line "
+                        None, None, f"duplicate key {shown(key)} (first given at line "
                                     f"{seen[key].line + 1})", key_node.start_mark)
                 seen[key] = key_node.start_mark
         return super().construct_mapping(node, deep=deep)
@@ -155,50 +219,69 @@ def _umask() -> int:
     return mask
 
 
+def in_place(path) -> bool:
+    """Whether ``path`` is a device or a pipe (``/dev/null``, ``/dev/full``, a FIFO),
+    written in place: renaming a file over it would replace the device itself."""
+    path = Path(path)
+    return path.exists() and not path.is_file()
+
+
+def temporary_beside(path, prefix: str, suffix: str) -> tuple[int, str]:
+    """``(fd, name)`` of a new file in ``path``'s folder (``prefix`` + random +
+    ``suffix``), with the mode ``open()`` would give it (mkstemp's is 0600):
+    written there and renamed over ``path`` at the end, it replaces ``path``
+    at once, or not at all."""
+    folder = Path(path).parent if str(Path(path).parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix=prefix, suffix=suffix)
+    os.fchmod(fd, 0o666 & ~_umask())
+    return fd, tmp
+
+
+def _remove(name) -> None:
+    if name is not None and os.path.exists(name):
+        os.unlink(name)
+
+
 def write_atomic(path, write, flag: str = "output", mode: str = "w") -> Path:
     """Write a file atomically: ``write(f)`` on a temporary file in the target
-    folder, renamed over ``path``. No temporary file is left behind. A
-    ``path`` that is a device or a pipe is written in place.
+    folder, renamed over ``path``. No temporary file is left behind, and an
+    existing ``path`` stays as it was unless the write succeeds. A ``path``
+    that is a device or a pipe is written in place.
 
-    If writing fails (disk full, folder removed meanwhile, ...), the same
-    content is written to :func:`fallback_path` and a :class:`PanelDeployError`
-    names ``flag``, the reason and where the content is, so nothing computed is lost.
+    If writing fails (disk full, file size limit, folder removed meanwhile,
+    ...), the same content is written to :func:`fallback_path` and a
+    :class:`PanelDeployError` names ``flag``, the reason and where the content
+    is, so nothing computed is lost; a fallback file that fails too is removed.
     """
     path = Path(path)
     text = {} if "b" in mode else {"encoding": "utf-8"}
-    if path.exists() and not path.is_file():
-        # a device or a pipe (/dev/null, /dev/stdout, a FIFO): renaming a file
-        # over it would replace the device itself, so it is written in place
-        with open(path, mode, **text) as f:
-            write(f)
-        return path
-    folder = path.parent if str(path.parent) else Path(".")
     tmp = None
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".part")
-        # mkstemp makes the file private (0600); the result gets the mode
-        # open() would give it
-        os.fchmod(fd, 0o666 & ~_umask())
+        if in_place(path):
+            with open(path, mode, **text) as f:
+                write(f)
+            return path
+        fd, tmp = temporary_beside(path, f".{path.name}.", ".part")
         with os.fdopen(fd, mode, **text) as f:
             write(f)
         os.replace(tmp, path)
         return path
     except OSError as e:
-        if tmp is not None and os.path.exists(tmp):
-            os.unlink(tmp)
+        _remove(tmp)
         reason = e.strerror or str(e)
+        rescue = None
         try:
             rescue = fallback_path(path)
             with open(rescue, mode, **text) as f:
                 write(f)
         except OSError as e2:
+            _remove(rescue)  # a partial file would look like a result
             raise PanelDeployError(f"{flag}: cannot write {path} ({reason}), nor a fallback "
                                    f"file ({e2.strerror or e2}); the result is lost") from None
         raise PanelDeployError(f"{flag}: cannot write {path} ({reason}); the result is saved "
                                f"in {rescue}") from None
     except BaseException:
-        if tmp is not None and os.path.exists(tmp):
-            os.unlink(tmp)
+        _remove(tmp)
         raise
 
 
@@ -238,14 +321,16 @@ def finite_number(value, flag: str, *, low=None, high=None, low_open=False, inte
         return None
     kind = "an integer" if integer else "a number"
     if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-            (integer and not float(value).is_integer()):
-        raise SceneError(flag, f"expected {kind}, got {value!r}")
+            (integer and not isinstance(value, int) and not float(value).is_integer()):
+        raise SceneError(flag, f"expected {kind}, got {shown(value)}")
+    if isinstance(value, int) and abs(value) > 2 ** 1023:  # beyond any float: math would raise
+        raise SceneError(flag, f"expected a finite number, got {shown(value)}")
     if not math.isfinite(value):
         raise SceneError(flag, f"expected a finite number, got {value}")
     if low is not None and (value <= low if low_open else value < low):
-        raise SceneError(flag, f"expected {kind} {'>' if low_open else '>='} {low:g}, got {value:g}")
+        raise SceneError(flag, f"expected {kind} {'>' if low_open else '>='} {low:g}, got {shown(value)}")
     if high is not None and value > high:
-        raise SceneError(flag, f"expected {kind} <= {high:g}, got {value:g}")
+        raise SceneError(flag, f"expected {kind} <= {high:g}, got {shown(value)}")
     return value
 
 

@@ -2,10 +2,14 @@
 
 import json
 import math
+import os
+import zipfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from hostile import alias_bomb, alias_flow, file_size_limit, npy_declaring, npz_with
 
 from panel_deploy.cli import main
 from panel_deploy.trajectory_io import load_trajectory
@@ -247,12 +251,45 @@ def no_work(monkeypatch):
     (["fold", "--rows", "4", "--cols", "4", "--set", "array.rows=x"], "--set: only with --scene"),
     (["fold", "--rows", "40", "--cols", "40"], "--rows/--cols: 40 x 40 is above the enumeration limit"),
     (["fold", "--rows", "4", "--cols", "0"], "--cols: expected an integer >= 1"),
+    (["optimise", PAPER, "--perturb", "1" + "0" * 400],
+     "--perturb: expected a finite number, got <an integer of about 401 digits>"),
 ])
 def test_bad_flags_and_output_paths_fail_before_any_work(capsys, tmp_path, no_work, argv, expected):
     fill = {"missing": str(tmp_path / "missing"), "tmp": str(tmp_path)}
     line = one_line_error(capsys, [a.format(**fill) for a in argv])
     assert expected.format(**fill) in line, line
     assert not list(tmp_path.iterdir())  # nothing written, no stray .part
+
+
+@pytest.mark.parametrize("argv, flag, other", [
+    (["simulate", "{scene}", "--out", "{scene}"], "--out", "scene"),
+    (["simulate", "{scene}", "--out", "{link}"], "--out", "scene"),  # a symbolic link to it
+    (["simulate", "{scene}", "--out", "{hard}"], "--out", "scene"),  # a hard link: same inode
+    (["simulate", "{scene}", "--out", "{tmp}/sub/../s.yaml"], "--out", "scene"),
+    (["simulate", PAPER, "--stiffness", "{result}", "--record", "{result}"], "--record", "--stiffness"),
+    (["optimise", "{scene}", "--start", "{result}", "--out", "{result}"], "--out", "--start"),
+    (["export", "{scene}", "--mjcf", "{link}"], "--mjcf", "scene"),
+    (["fold", "--scene", "{scene}", "--plot", "{scene}"], "--plot", "--scene"),
+    (["replay", "{mcap}", "--save", "{mcap}"], "--save", "recording"),
+    (["replay", "{mcap}", "--png", "{mcap}"], "--png", "recording"),
+])
+def test_an_output_that_is_an_input_is_refused(capsys, tmp_path, no_work, argv, flag, other):
+    scene, result, mcap = tmp_path / "s.yaml", tmp_path / "k.yaml", tmp_path / "x.mcap"
+    scene.write_text(Path(PAPER).read_text())
+    result.write_text("hinges: {}\n")
+    mcap.write_bytes(b"\x89MCAP0\r\n")
+    (tmp_path / "sub").mkdir()
+    os.symlink(scene, tmp_path / "link.yaml")
+    os.link(scene, tmp_path / "hard.yaml")
+    before = {p: p.read_bytes() for p in (scene, result, mcap)}
+    fill = {"scene": scene, "result": result, "mcap": mcap, "tmp": tmp_path,
+            "link": tmp_path / "link.yaml", "hard": tmp_path / "hard.yaml"}
+    line = one_line_error(capsys, [a.format(**fill) for a in argv])
+    assert line.startswith(f"panel-deploy: error: {flag}: ") and f"is also the input {other} (" in line
+    assert "writing it would destroy the input" in line, line
+    assert all(p.read_bytes() == data for p, data in before.items())
+    assert sorted(os.listdir(tmp_path)) == ["hard.yaml", "k.yaml", "link.yaml", "s.yaml", "sub",
+                                            "x.mcap"]
 
 
 @pytest.mark.parametrize("item, expected", [
@@ -263,6 +300,11 @@ def test_bad_flags_and_output_paths_fail_before_any_work(capsys, tmp_path, no_wo
     ("array.length=1e-300", "--set array.length: expected a number >= 1e-06"),
     ("array.rows=40", "--set array.rows: expected an integer <= 12"),
     ("simulation.t_end=" + "[" * 100 + "]" * 100, "--set simulation.t_end: value"),
+    ("array.length=1" + "0" * 400, "--set array.length: expected a finite number, got <an integer"),
+    ("array.rows=" + alias_flow(6, 7),  # 117649 values once written out, shown in 80 characters
+     "--set array.rows: expected an integer, got list ['lol', ['lol', 'lol', 'lol', 'lol', 'lol', "
+     "'lol', ...], [['lol', 'lol', 'lol..."),
+    ("array.rows=" + alias_flow(), "--set array.rows: value '[&a0 \"lol\", &a1 [*a0, *a0"),
 ])
 def test_absurd_values_fail_at_once_naming_the_set_item(capsys, no_work, item, expected):
     line = one_line_error(capsys, ["simulate", PAPER, "--set", item])
@@ -339,10 +381,50 @@ def test_collide_checks_the_stored_poses_and_scene(capsys, tmp_path, trajectory)
     ({"stiffness": np.zeros(3)}, "stiffness has shape (3,)"),
     ({"status": np.array(-7)}, "status: -7 is not a simulation status"),
     ({"status": np.array(-2)}, "success True contradicts status -2"),
+    ({"scene_yaml": np.array(alias_bomb())}, "stored scene is invalid (at line 1, column 281: "
+                                              "aliases expand it beyond 1000000"),
 ])
 def test_malformed_trajectory_arrays_are_one_line(capsys, tmp_path, trajectory, change, expected):
     line = one_line_error(capsys, ["collide", str(rewrite(trajectory, tmp_path / "x.npz", **change))])
     assert expected in line, line
+
+
+@pytest.mark.parametrize("member, content, expected", [
+    ("theta.npy", npy_declaring((10**12,)),  # 8 TB declared in a 128-byte header
+     "theta.npy: its header declares shape (1000000000000,) of float64 (8000000000000 bytes), "
+     "but the member holds 0 bytes"),
+    ("t.npy", npy_declaring((3, 10**6), bytes(800)), "but the member holds 800 bytes"),
+    ("t.npy", npy_declaring((50_001,), bytes(8 * 50_001)),
+     "t.npy: 50001 samples, above the limit of 50000"),
+    ("notes.txt", b"x", "notes.txt: not an array"),
+])
+def test_declared_sizes_are_checked_before_reading(capsys, tmp_path, trajectory, member, content,
+                                                   expected):
+    bad = tmp_path / "declared.npz"
+    data = trajectory.read_bytes()
+    if member.endswith(".npy"):
+        bad.write_bytes(npz_with(data, member, content))
+    else:
+        bad.write_bytes(data)
+        with zipfile.ZipFile(bad, "a") as z:
+            z.writestr(member, content)
+    line = one_line_error(capsys, ["collide", str(bad)])
+    assert line == f"panel-deploy: error: {bad}: {expected}" or expected in line, line
+
+
+def test_an_archive_declaring_more_than_any_trajectory_is_refused(capsys, tmp_path, trajectory,
+                                                                 monkeypatch):
+    # zeros deflate a thousand fold: 2 GB held in 2 MB; here the limit is scaled down
+    from panel_deploy import trajectory_io
+    monkeypatch.setattr(trajectory_io, "_BYTES_PER_BODY_SAMPLE", 1)
+    bad = tmp_path / "big.npz"
+    bad.write_bytes(npz_with(trajectory.read_bytes(), "closure_sigma_min.npy",
+                             npy_declaring((10, 10**5), bytes(8 * 10**6))))
+    assert bad.stat().st_size < trajectory.stat().st_size + 20_000
+    line = one_line_error(capsys, ["collide", str(bad)])
+    assert line.startswith(f"panel-deploy: error: {bad}: its arrays declare 87"), line
+    assert line.endswith("above the 7200000 of the largest trajectory a scene can ask for (50000 "
+                         "samples of 12 x 12 panels)"), line
 
 
 def test_corrupt_compressed_data_is_one_line(capsys, tmp_path, trajectory):
@@ -377,6 +459,7 @@ def _hinges(tmp_path, text):
     ("format: other/2\nhinges: {a: 1}\n", "format: expected panel_deploy.stiffness/1"),
     ("hinges: {a: 1}\nbogus: 3\n", "bogus: unknown key"),
     ("hinges: {a: 1}\nhinges: {b: 2}\n", "duplicate key 'hinges'"),
+    (alias_bomb(key="hinges"), "aliases expand it beyond 1000000"),
 ])
 def test_bad_result_files_are_one_line(capsys, tmp_path, no_work, flag, text, expected):
     command = "simulate" if flag == "--stiffness" else "optimise"
@@ -420,3 +503,31 @@ def test_collide_never_prints_a_non_finite_report(capsys, trajectory, monkeypatc
     monkeypatch.setattr(CollisionReport, "to_dict", lambda self, **k: {**real(self, **k), "v": math.nan})
     code, out, err = run(capsys, "collide", str(trajectory), "--json")
     assert code == 1 and out == "" and err.strip() == "panel-deploy: collide: non-finite result: v = nan"
+
+
+@pytest.mark.parametrize("target, limit, expected", [
+    ("/dev/full", None, "--out: cannot write /dev/full (No space left on device); the result is "
+                        "saved in {tmp}/panel-deploy-rescued-full-"),
+    ("old.npz", 20_000, "--out: cannot write old.npz (File too large), nor a fallback file (File "
+                        "too large); the result is lost"),  # ulimit -f
+])
+def test_an_output_that_cannot_be_written_is_one_line(tmp_path, target, limit, expected):
+    import subprocess
+    import sys
+
+    (tmp_path / "old.npz").write_bytes(b"the previous trajectory")
+    cli = str(Path(sys.executable).parent / "panel-deploy")
+    proc = subprocess.run([cli, "simulate", PAPER, "--t-end", "0.3", "--out", target],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path,
+                          preexec_fn=file_size_limit(limit))
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert lines[-1].startswith("panel-deploy: error: " + expected.format(tmp=tmp_path)), lines
+    assert (tmp_path / "old.npz").read_bytes() == b"the previous trajectory"
+    rescued = sorted(set(tmp_path.iterdir()) - {tmp_path / "old.npz"})
+    if limit:  # the fallback failed too: no unreadable partial file is left
+        assert rescued == []
+    else:
+        assert [str(p) for p in rescued] == [lines[-1].rsplit("saved in ", 1)[1]]
+        result, scene, _ = load_trajectory(rescued[0])
+        assert result.t[-1] == pytest.approx(0.3) and scene.name == "paper_4x4"

@@ -4,6 +4,10 @@ Random scene mutations, random ``--set`` values, random byte corruptions of
 scene, result and trajectory files, run through :func:`panel_deploy.cli.main`
 in-process. Each run must end with exit 0 or 1 and a finite answer, or exit 2
 with exactly one line on stderr; never a traceback (any other exception fails).
+Issue 26 adds hostile files: YAML aliases (up to billion laughs) in every
+place YAML is read, ``.npy`` headers and MCAP chunks declaring sizes they do
+not hold (answered within seconds), and outputs naming an input file by
+another path (refused, the input unchanged).
 
 The example budget is fixed and the examples derandomised, so CI runs the same
 cases every time in well under a minute; ``bench/fuzz_cli.py`` runs the same
@@ -15,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -25,7 +30,11 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from hostile import alias_flow, mcap_with_chunk, npy_declaring, npz_with
+
 from panel_deploy.cli import main
+from panel_deploy.record import messages
+from panel_deploy.record.writer import Recorder
 from panel_deploy.scene import SECTIONS
 from panel_deploy.validate import first_non_finite_value
 
@@ -192,6 +201,122 @@ def case_trajectory_arrays(name, value, trajectory: bytes):
         run_cli("trajectory", ["collide", path, "--json"])
 
 
+#: Longest a run on a hostile file may take, s (an alias bomb took minutes and gigabytes).
+HOSTILE_SECONDS = 10.0
+
+
+def _quick(kind):
+    seconds, argv = LOG[-1][2], LOG[-1][4]
+    if seconds > HOSTILE_SECONDS:
+        raise Broken(f"{kind}: {seconds:.1f} s for {argv}")
+
+
+def _scene_with(key, flow) -> str:
+    """The paper scene as YAML text with ``key`` set to the YAML text ``flow`` (aliases and all)."""
+    data = yaml.safe_load(PAPER_TEXT)
+    _set(data, key, "FLOW_GOES_HERE")
+    return yaml.safe_dump(data).replace("FLOW_GOES_HERE", flow)
+
+
+def case_aliases(levels, width, where, key, trajectory: bytes, result_text: str):
+    """``alias_flow(levels, width)`` (width ** levels values written out) at ``key`` of a
+    scene file, a --set, a result file's hinge, a trajectory's stored scene or the
+    scene message of a recording."""
+    flow = alias_flow(levels, width)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "input"
+        if where == "scene":
+            path.write_text(_scene_with(key, flow))
+            run_cli("aliases", ["simulate", path, "--json", *FAST])
+        elif where == "--set":
+            run_cli("aliases", ["simulate", PAPER, "--json", *FAST, "--set", f"{key}={flow}"])
+        elif where == "result":
+            path.write_text(result_text.replace("{k: 0.05, c: 0.00215}", flow, 1))
+            run_cli("aliases", ["simulate", PAPER, "--json", "--stiffness", path, *FAST])
+        elif where == "trajectory":
+            path.write_bytes(trajectory)
+            with np.load(path) as z:
+                data = {k: z[k] for k in z.files}
+            data["scene_yaml"] = np.array(_scene_with(key, flow))
+            np.savez(Path(tmp) / "t.npz", **data)
+            run_cli("aliases", ["collide", Path(tmp) / "t.npz", "--json"])
+        else:
+            with Recorder(Path(tmp) / "r.mcap") as rec:
+                rec.write("/panel_deploy/model", messages.STRING,
+                          messages.string(_scene_with(key, flow)), 0)
+                rec.write("/joint_states", messages.JOINT_STATE,
+                          messages.joint_state(["a"], 0.0, [0.0], [0.0], [0.0]), 0)
+            run_cli("aliases", ["collide", Path(tmp) / "r.mcap", "--json"])
+    _quick("aliases")
+
+
+def case_declared_size(name, shape, held, trajectory: bytes):
+    """Member ``name`` of a trajectory replaced by a header declaring ``shape`` and ``held`` bytes."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "t.npz"
+        path.write_bytes(npz_with(trajectory, f"{name}.npy", npy_declaring(shape, bytes(held))))
+        run_cli("declared sizes", ["collide", path, "--json"])
+    _quick("declared sizes")
+
+
+def case_chunk_size(declared, zeros):
+    """A recording whose one chunk declares ``declared`` bytes and holds ``zeros`` zeros."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "r.mcap"
+        path.write_bytes(mcap_with_chunk(declared, zeros))
+        run_cli("declared sizes", ["collide", path, "--scene", PAPER, "--json"])
+    _quick("declared sizes")
+
+
+#: Command lines whose output (``{same}``) names one of their inputs, and that input's file.
+SAME_PATH = {
+    "simulate --out": (["simulate", "{scene}", "--out", "{same}"], "s.yaml"),
+    "simulate --record": (["simulate", "{scene}", "--record", "{same}"], "s.yaml"),
+    "simulate --stiffness --out": (["simulate", "{scene}", "--stiffness", "{result}", "--out",
+                                    "{same}"], "k.yaml"),
+    "optimise --start --out": (["optimise", "{scene}", "--start", "{result}", "--out", "{same}"],
+                               "k.yaml"),
+    "export --mjcf": (["export", "{scene}", "--mjcf", "{same}"], "s.yaml"),
+    "fold --plot": (["fold", "--scene", "{scene}", "--plot", "{same}"], "s.yaml"),
+    "replay --save": (["replay", "{mcap}", "--save", "{same}"], "x.mcap"),
+    "replay --png": (["replay", "{mcap}", "--png", "{same}"], "x.mcap"),
+}
+#: Other names of one file: itself, through ``..``, ``//``, a symbolic or a hard link.
+PATH_FORMS = ("same", "dotdot", "slashes", "symlink", "hardlink")
+
+
+def _other_name(path: Path, form: str) -> Path | str:
+    if form == "dotdot":
+        return path.parent / "sub" / ".." / path.name
+    if form == "slashes":
+        return f"{path.parent}//{path.name}"
+    if form in ("symlink", "hardlink"):
+        other = path.parent / f"{form}-{path.name}"
+        (os.symlink if form == "symlink" else os.link)(path, other)
+        return other
+    return path
+
+
+def case_same_path(command, form):
+    """An output that names an input file: refused (exit 2, one line), every file unchanged."""
+    argv, name = SAME_PATH[command]
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        files = {"scene": tmp / "s.yaml", "result": tmp / "k.yaml", "mcap": tmp / "x.mcap"}
+        files["scene"].write_text(PAPER_TEXT)
+        files["result"].write_text("hinges: {}\n")
+        files["mcap"].write_bytes(b"\x89MCAP0\r\n")
+        (tmp / "sub").mkdir()
+        same = _other_name(tmp / name, form)
+        before = {p: p.read_bytes() for p in tmp.iterdir() if p.is_file()}
+        code, _, err = run_cli("same path", [a.format(same=same, **files) for a in argv])
+        if code != 2 or "is also the input" not in err:
+            raise Broken(f"same path: {command} on {same} gave exit {code}: {err!r}")
+        after = {p: p.read_bytes() for p in tmp.iterdir() if p.is_file()}
+        if after != before:
+            raise Broken(f"same path: {command} on {same} changed the files")
+
+
 def _array(v):
     try:
         return np.array(v)
@@ -206,6 +331,15 @@ arrays = st.one_of(
 array_names = st.sampled_from(["t", "theta", "omega", "rotation", "position", "constraint_gap",
                                "closure_sigma_min", "energy_kinetic", "stiffness", "scene_yaml",
                                "format_version", "success", "status", "message", "method"])
+
+
+alias_shapes = st.tuples(st.integers(1, 12), st.integers(1, 12))  # levels, width
+alias_places = st.sampled_from(["scene", "--set", "result", "trajectory", "model"])
+alias_keys = st.sampled_from(["array.rows", "array.length", "hinges.overrides", "gravity", "name",
+                              "fold.merge", "simulation", "optimisation.bounds"])
+dimensions = st.sampled_from([0, 1, 3, 9, 50_000, 50_001, 10**6, 10**12, 2**62]) | st.integers(0, 10**13)
+declared_shapes = st.lists(dimensions, max_size=3).map(tuple)
+chunk_sizes = st.sampled_from([0, 1, 1000, 2**25, 2**25 + 1, 2**30, 2**64 - 1]) | st.integers(0, 2**64 - 1)
 
 
 # --- fixtures: one valid result file and one valid trajectory ---
@@ -274,6 +408,30 @@ def test_fuzz_trajectory_bytes(trajectory, ops):
 @given(name=array_names, value=arrays)
 def test_fuzz_trajectory_arrays(trajectory, name, value):
     case_trajectory_arrays(name, value, trajectory)
+
+
+@settings(CI, max_examples=40)
+@given(shape=alias_shapes, where=alias_places, key=alias_keys)
+def test_fuzz_aliases(trajectory, result_text, shape, where, key):
+    case_aliases(*shape, where, key, trajectory, result_text)
+
+
+@settings(CI, max_examples=40)
+@given(name=array_names, shape=declared_shapes, held=st.integers(0, 200))
+def test_fuzz_declared_sizes(trajectory, name, shape, held):
+    case_declared_size(name, shape, held, trajectory)
+
+
+@settings(CI, max_examples=20)
+@given(declared=chunk_sizes, zeros=st.integers(0, 2**20))
+def test_fuzz_chunk_sizes(declared, zeros):
+    case_chunk_size(declared, zeros)
+
+
+@settings(CI, max_examples=40)
+@given(command=st.sampled_from(sorted(SAME_PATH)), form=st.sampled_from(PATH_FORMS))
+def test_fuzz_same_path_outputs(command, form):
+    case_same_path(command, form)
 
 
 def test_the_contract_check_can_fail(monkeypatch):

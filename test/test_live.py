@@ -1,8 +1,11 @@
 """panel_deploy.live: the ROS-free core of the nodes, checked against the batch core."""
 
 
+import time
+
 import numpy as np
 import pytest
+from hostile import alias_bomb
 
 from panel_deploy.build import build_model
 from panel_deploy.dynamics import simulate
@@ -114,6 +117,15 @@ def test_scene_text_round_trips_with_stiffness(scene):
     assert np.allclose(again.stiffness, k)
     with pytest.raises(SceneError, match="not valid YAML"):
         scene_from_yaml("array: [1, 2")
+
+
+def test_a_model_message_with_an_alias_bomb_is_refused_at_once():
+    # one such message on /panel_deploy/model took down collision_monitor and dynamics
+    start = time.perf_counter()
+    with pytest.raises(SceneError, match=r"^/panel_deploy/model: not valid YAML \(at line 1, "
+                                         r"column \d+: aliases expand it beyond 1000000"):
+        scene_from_yaml(alias_bomb(key="array"))
+    assert time.perf_counter() - start < 0.5
 
 
 def test_optimisation_scene_validates_overrides(scene):

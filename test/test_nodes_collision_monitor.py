@@ -4,10 +4,12 @@ import math
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+from hostile import alias_bomb
 from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from ros_harness import Client, NodeProcess, wait_for
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from panel_deploy.collision import CollisionSettings, check_trajectory
@@ -138,6 +140,23 @@ def test_reset_starts_a_new_deployment(graph, deployment):
     last = [s for s in statuses(diagnostics) if {kv.key: kv.value for kv in s.values}
             .get("samples") == "20"][-1]
     assert last.level == messages.OK and last.message == "no collision"
+
+
+def test_an_alias_bomb_on_the_model_topic_is_ignored_at_once(graph, deployment):
+    # one such message from anyone on the graph took down collision_monitor and dynamics
+    client, publisher, events, diagnostics, markers = graph
+    model, result, report = deployment
+    bomb = client.node.create_publisher(String, "/panel_deploy/model", messages.LATCHED)
+    diagnostics.clear()
+    bomb.publish(String(data=alias_bomb(key="array")))
+    wait_for(lambda: any("ignored a model" in s.message and "aliases expand it beyond" in s.message
+                         for s in statuses(diagnostics, messages.WARN)), timeout=10,
+             what="the monitor's warning")
+    client.node.destroy_publisher(bomb)
+    assert client.trigger("/collision_monitor/reset").success  # the model it had is kept
+    diagnostics.clear()
+    feed(publisher, model, result, range(20))
+    wait_checked(diagnostics, 20)
 
 
 @pytest.mark.parametrize("param, reason", [

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hostile import file_size_limit
 from rclpy.serialization import deserialize_message
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
@@ -90,8 +91,27 @@ def test_collide_reads_the_recording_and_agrees(recording):
     assert abs(first["t"] - report.first_collision.t) <= 1e-6
 
 
-def test_unwritable_record_path_is_one_line(tmp_path):
-    proc = subprocess.run([CLI, "run", "paper_4x4", "--record", str(tmp_path / "no" / "x.mcap")],
+@pytest.mark.parametrize("target", ["{tmp}/no/x.mcap", "/dev/full"])
+def test_unwritable_record_path_is_one_line(tmp_path, target):
+    target = target.format(tmp=tmp_path)
+    proc = subprocess.run([CLI, "run", "paper_4x4", "--record", target],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
-    assert len(proc.stderr.strip().splitlines()) == 1 and "x.mcap" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1 and target in proc.stderr
+
+
+def test_a_recording_that_fills_the_disk_stops_and_the_run_goes_on(tmp_path, compiled_nodes):
+    (tmp_path / "x.mcap").write_bytes(b"the previous recording")
+    proc = subprocess.run([CLI, "run", "paper_4x4", "--real-time-factor", "0", "--json", "--record",
+                           "x.mcap", "--set", f"simulation.t_end={T_END}"], cwd=tmp_path,
+                          preexec_fn=file_size_limit(50_000),  # outgrown mid-run
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    # the run's answer is kept (last line: Fast DDS complains on stdout that the limit
+    # also stops its shared-memory segments)
+    assert json.loads(proc.stdout.strip().splitlines()[-1])["collision"]["first_collision"]
+    assert proc.stderr.strip().splitlines()[-1] == ("panel-deploy: error: x.mcap: cannot write the "
+                                                    "recording (File too large); x.mcap is "
+                                                    "unchanged")
+    assert (tmp_path / "x.mcap").read_bytes() == b"the previous recording"
+    assert [p.name for p in tmp_path.iterdir()] == ["x.mcap"]

@@ -6,15 +6,23 @@ written by rosbags), without velocities, stamped with wall-clock time.
 """
 
 import json
+import subprocess
+import sys
+import time
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
+from hostile import file_size_limit, mcap_with_chunk
 
 from panel_deploy.cli import main
 from panel_deploy.record import messages as m
+from panel_deploy.record import open_recording
 from panel_deploy.record.writer import Recorder
 from panel_deploy.pipeline import simulate_scene
 from panel_deploy.scene import load_scene, resolve_scene
+
+CLI = str(Path(sys.executable).parent / "panel-deploy")
 
 
 @pytest.fixture(scope="module")
@@ -60,6 +68,25 @@ def test_corrupt_chunk(recording, tmp_path, capsys):
     path.write_bytes(bytes(data))
     assert main(["collide", str(path)]) == 2
     _one_line_error(capsys, path, "corrupt")
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4"])
+@pytest.mark.parametrize("declared, zeros, expected", [
+    (1 << 30, 1 << 30, "declares 1073741824 bytes uncompressed, above the reader's limit of "
+                       "33554432"),  # 1 GiB of zeros: 33 kB compressed
+    (1000, 1 << 24, "declares 1000 bytes uncompressed but holds more"),  # the frame is not trusted
+    (1000, 10, "declares 1000 bytes uncompressed but holds 10"),
+])
+def test_chunk_sizes_are_checked_before_inflating(tmp_path, capsys, declared, zeros, expected,
+                                                  compression):
+    if compression == "lz4":
+        pytest.importorskip("lz4")
+    path = tmp_path / "bomb.mcap"
+    path.write_bytes(mcap_with_chunk(declared, zeros, compression))
+    start = time.perf_counter()
+    assert main(["collide", str(path), "--scene", "paper_4x4"]) == 2
+    assert time.perf_counter() - start < 5
+    _one_line_error(capsys, path, "corrupt chunk record at byte 36", expected)
 
 
 def test_truncated_file_is_read_up_to_its_end_and_says_so(recording, tmp_path, capsys):
@@ -153,3 +180,44 @@ def test_collide_on_an_encoder_recording_from_ros2_bag_record(tmp_path, capsys):
     assert "counted from the first /joint_states stamp" in captured.err
     assert got["first_collision"]["pair"] == list(report.first_collision.names)
     assert abs(got["first_collision"]["t"] - report.first_collision.t) <= 0.005 + 1e-6
+
+
+# --- issue 26: a recording replaces its target whole, or not at all ---
+
+@pytest.mark.parametrize("target, limit", [("/dev/full", None), ("old.mcap", 30_000),
+                                           ("new.mcap", 30_000)])
+def test_a_recording_that_cannot_be_written_is_one_line_and_leaves_the_target(
+        tmp_path, target, limit):
+    old = tmp_path / "old.mcap"
+    old.write_bytes(b"the previous recording")
+    proc = subprocess.run([CLI, "simulate", "paper_4x4", "--t-end", "0.5", "--record", target],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path,
+                          preexec_fn=file_size_limit(limit))
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    reason = "File too large" if limit else "No space left on device"
+    assert lines[-1].startswith(f"panel-deploy: error: {target}: cannot write the recording "
+                                f"({reason})"), lines
+    assert [line for line in lines if "error" in line] == lines[-1:]  # the rest: compile note
+    assert lines[-1].endswith("old.mcap is unchanged") == (target == "old.mcap"), lines[-1]
+    assert old.read_bytes() == b"the previous recording"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old.mcap"]  # no partial file left
+
+
+def test_two_recorders_of_one_file_leave_one_whole_recording(tmp_path):
+    path = tmp_path / "both.mcap"
+    first, second = Recorder(path), Recorder(path)
+    assert {Path(first.partial).parent, Path(second.partial).parent} == {tmp_path}
+    for j in range(50):  # interleaved, as two processes would
+        first.write("/chatter", m.STRING, m.string(f"first {j}"), j)
+        second.write("/chatter", m.STRING, m.string(f"second {j}"), j)
+        if j % 10 == 9:
+            first.flush()
+            second.flush()
+    assert not path.exists()  # nothing at the target before a recording is whole
+    second.close()
+    first.close()
+    recording = open_recording(path)
+    assert recording.truncated is None
+    assert [msg.data for _, msg in recording.messages("/chatter")] == [f"first {j}" for j in range(50)]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["both.mcap"]

@@ -1,10 +1,15 @@
-"""A recording process killed with SIGKILL mid-run: the file is read back up to its last
-complete chunk, and at most 0.5 s of computed simulated time is missing from it."""
+"""A recording process killed with SIGKILL mid-run: the file, left under its partial name,
+is read back up to its last complete chunk, and at most 0.5 s of computed simulated time is
+missing from it; collide and replay say it was cut, rerun reads it with --recover."""
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
+from pathlib import Path
+
+import pytest
 
 import numpy as np
 
@@ -49,11 +54,13 @@ def test_sigkill_mid_run_loses_at_most_half_a_second(tmp_path):
     computed = max([computed] + [float(x) for x in rest.split()])
     assert 1.5 <= computed < 9.0, "killed mid-run"
 
-    recording = open_recording(path)
+    assert not path.exists()  # never renamed into place
+    (partial,) = tmp_path.glob("killed.*.part.mcap")  # the name README gives
+    recording = open_recording(partial)
     assert recording.truncated  # no footer: the process never closed the file
     states = joint_states(recording)
     model = build_model(load_scene(resolve_scene("paper_4x4")))
-    track = hinge_track(states, model, path)
+    track = hinge_track(states, model, partial)
     assert np.allclose(np.diff(track.t), 0.005, atol=1e-9)  # every sample up to the cut
     assert np.allclose(track.theta[0], model.theta_stowed)
     assert computed - track.t[-1] <= 0.5, (computed, track.t[-1])
@@ -67,8 +74,28 @@ def test_sigkill_mid_run_loses_at_most_half_a_second(tmp_path):
 
     messages = 0
     try:
-        for record in StreamReader(open(path, "rb"), validate_crcs=True).records:
+        for record in StreamReader(open(partial, "rb"), validate_crcs=True).records:
             messages += isinstance(record, Message)
     except Exception:
         pass  # the cut
     assert messages == sum(recording.count(t) for t in recording.topics)
+
+    # collide and replay work on it and say (one line on stderr) that it was cut
+    cli = str(Path(sys.executable).parent / "panel-deploy")
+    for argv in (["collide", partial], ["replay", partial, "--save", tmp_path / "cut.rrd"]):
+        proc = subprocess.run([cli, *map(str, argv)], capture_output=True, text=True, timeout=120)
+        notes = [line for line in proc.stderr.splitlines() if "is truncated" in line]
+        assert proc.returncode in (0, 1) and len(notes) == 1, proc.stderr
+        assert "without the MCAP footer" in notes[0] and f"{track.t[-1]:.4f} s" in notes[0]
+
+    # README's recovery: rerun converts it only with --recover (without, an empty file, exit 0)
+    rerun = shutil.which("rerun") or str(Path(sys.executable).parent / "rerun")
+    if not os.path.exists(rerun):
+        pytest.skip("no rerun CLI")
+    sizes = {}
+    for flags in ([], ["--recover"]):
+        out = tmp_path / f"recovered{len(flags)}.rrd"
+        subprocess.run([rerun, "mcap", "convert", *flags, str(partial), "-o", str(out)],
+                       capture_output=True, timeout=120, check=True)
+        sizes[len(flags)] = out.stat().st_size
+    assert sizes[0] < 10_000 and sizes[1] > 100 * sizes[0], sizes

@@ -10,6 +10,7 @@ from collections import defaultdict
 
 import numpy as np
 import pytest
+from hostile import file_size_limit
 
 from panel_deploy.build import build_model
 from panel_deploy.cli import main
@@ -85,6 +86,27 @@ def test_png_instant_outside_the_recording(recording, tmp_path, capsys):
     assert main(["replay", str(recording), "--png", str(tmp_path / "x.png"), "--at", "0,7"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("panel-deploy: error: --at: 7 s is outside the recording") and "\n" not in err
+
+
+@pytest.mark.parametrize("target, limit, expected", [
+    ("/dev/full", None, "cannot write /dev/full (No space left on device); the result is saved in "),
+    ("old.rrd", 20_000, "cannot write old.rrd (File too large), nor a fallback file (File too "
+                        "large); the result is lost"),  # ulimit -f: rerun's file sink hung here
+])
+def test_an_rrd_that_cannot_be_written_is_one_line(recording, tmp_path, target, limit, expected):
+    (tmp_path / "old.rrd").write_bytes(b"the previous replay")
+    cli = os.path.join(os.path.dirname(sys.executable), "panel-deploy")
+    proc = subprocess.run([cli, "replay", str(recording), "--save", target], cwd=tmp_path,
+                          preexec_fn=file_size_limit(limit), capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 2 and proc.stderr.startswith("panel-deploy: error: --save: " + expected)
+    assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert (tmp_path / "old.rrd").read_bytes() == b"the previous replay"
+    left = sorted(p.name for p in tmp_path.iterdir())
+    assert left[0] == "old.rrd" and len(left) == (1 if limit else 2)
+    if not limit:  # the rescued .rrd is a whole one
+        values, _ = _entities(tmp_path / left[1])
+        assert values
 
 
 def test_viewer_without_a_display_is_refused_before_any_work(tmp_path, monkeypatch, capsys):

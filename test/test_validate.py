@@ -1,15 +1,17 @@
 """The shared checks of panel_deploy.validate: YAML loader, output paths, atomic writes, finiteness."""
 
 import os
+import time
 
 import numpy as np
 import pytest
 import yaml
+from hostile import alias_bomb
 
 from panel_deploy.errors import PanelDeployError, SceneError
-from panel_deploy.validate import (MAX_YAML_DEPTH, check_finite, check_output_path,
-                                   first_non_finite_value, load_yaml, read_text, save_figure,
-                                   write_atomic)
+from panel_deploy.validate import (MAX_YAML_DEPTH, MAX_YAML_EXPANDED, check_finite,
+                                   check_output_path, first_non_finite_value, load_yaml, read_text,
+                                   save_figure, write_atomic, yaml_problem)
 
 
 @pytest.mark.parametrize("text, problem", [
@@ -26,6 +28,32 @@ def test_yaml_loader_refuses_duplicates_and_depth(text, problem):
 def test_yaml_loader_reads_what_safe_load_reads():
     text = "a: [1, 2.5, {b: c}]\nd: &x {e: 1}\nf: {<<: *x, g: 2}\n"
     assert load_yaml(text) == yaml.safe_load(text)
+    # aliases that stay within the bound are read as ever
+    assert load_yaml(alias_bomb(levels=4, width=9)) == yaml.safe_load(alias_bomb(levels=4, width=9))
+
+
+def test_yaml_alias_bombs_are_refused_at_once():
+    text = alias_bomb()  # 9 ** 9 = 387 million values written out, from 500 bytes
+    assert len(text) < 500
+    start = time.perf_counter()
+    with pytest.raises(yaml.YAMLError, match=f"aliases expand it beyond {MAX_YAML_EXPANDED} "):
+        load_yaml(text)
+    assert time.perf_counter() - start < 0.5
+    # recursive, or nesting deeper than the limit only once written out
+    for text in ("a: &a [*a]\n", "a: &a {b: *a}\n",
+                 "a: &a " + "[" * 20 + "]" * 20 + "\nb: " + "[" * 20 + "*a" + "]" * 20 + "\n"):
+        with pytest.raises(yaml.YAMLError, match=f"aliases nest it deeper than {MAX_YAML_DEPTH}"):
+            load_yaml(text)
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("a: 2001-02-30\n", "line 1, column 4: cannot read '2001-02-30' (day is out of range for month)"),
+    ("a: " + "1" * 5000, "cannot read '11111111111111111111111"),  # more digits than int() reads
+])
+def test_scalars_that_do_not_convert_are_yaml_errors(text, problem):
+    with pytest.raises(yaml.YAMLError) as e:
+        load_yaml(text)
+    assert problem in yaml_problem(e.value) and len(yaml_problem(e.value)) < 200
 
 
 def test_output_path_checks(tmp_path):

@@ -2,8 +2,9 @@
 
 Every flag is checked here, named as the user typed it (``--perturb-tol``,
 not the internal ``stiffness_tol``), and every output path is checked (its
-folder exists and is writable, it is not a folder) so that a long simulation
-or search never ends in an unwritable file. Options that would be ignored or
+folder exists and is writable, it is not a folder, it is neither another
+output nor one of the command's input files) so that a long simulation or
+search never ends in an unwritable file or destroys what it read. Options that would be ignored or
 that conflict are errors, not silently dropped. The rules themselves are in
 :mod:`panel_deploy.validate`, shared with the ROS nodes; the flags that are
 aliases of ``--set`` (:mod:`panel_deploy.cli.args`) meet the scene's own
@@ -11,6 +12,9 @@ validation instead.
 """
 
 from __future__ import annotations
+
+import os
+from pathlib import Path
 
 from ..errors import SceneError
 from ..validate import check_output_path, finite_number
@@ -34,20 +38,59 @@ OUTPUTS = {
 }
 
 
+#: Input files of each command (attribute, flag or argument name).
+INPUTS = {
+    "simulate": (("scene", "scene"), ("stiffness", "--stiffness")),
+    "optimise": (("scene", "scene"), ("start", "--start")),
+    "run": (("scene", "scene"),),
+    "export": (("scene", "scene"),),
+    "fold": (("scene", "--scene"),),
+    "replay": (("recording", "recording"), ("scene", "--scene")),
+    "bench": (("scene", "scene"),),
+}
+
+
 def check_args(args) -> None:
     """Check the parsed ``args`` of one command; :class:`SceneError` naming the flag."""
+    from ..scene import resolve_scene
+
     command = getattr(args, "command", None)
     outputs = [(getattr(args, attr, None), flag) for attr, flag in OUTPUTS.get(command, ())]
-    seen = {}
+    inputs = [(resolve_scene(path) if "scene" in attr else path, flag)
+              for attr, flag in INPUTS.get(command, ())
+              if (path := getattr(args, attr, None)) is not None]
+    earlier = []
     for path, flag in outputs:
         check_output_path(path, flag)
-        if path is not None:
-            if str(path) in seen:
-                raise SceneError(flag, f"{path} is also {seen[str(path)]}: give two files")
-            seen[str(path)] = flag
+        if path is None:
+            continue
+        for other, other_flag in inputs:
+            if _same_file(path, other):
+                raise SceneError(flag, f"{path} is also the input {other_flag} ({other}): "
+                                       "writing it would destroy the input; give another file")
+        for other, other_flag in earlier:
+            if _same_file(path, other):
+                raise SceneError(flag, f"{path} is also {other_flag}: give two files")
+        earlier.append((path, flag))
     check = _CHECKS.get(command)
     if check is not None:
         check(args)
+
+
+def _same_file(output, other) -> bool:
+    """Whether writing ``output`` would write the file ``other``: the same path
+    once resolved (links, ``..``), or the same inode (hard links). A device or
+    pipe is written in place and replaces nothing, so it only matches by name."""
+    output, other = Path(output), Path(other)
+    if str(output) == str(other):
+        return True
+    try:
+        if output.exists() and not output.is_file():
+            return False
+        return output.resolve() == other.resolve() or (
+            output.exists() and other.exists() and os.path.samefile(output, other))
+    except (OSError, RuntimeError, ValueError):  # a loop of links, a name too long, a NUL byte
+        return False
 
 
 def _positive_int(args, attr, flag, low=1):

@@ -11,6 +11,7 @@ from ..errors import SceneError
 from ..record.analysis import read_deployment
 from ..record.replay import blueprint, log_deployment
 from ..record.strip import render_strip
+from ..validate import write_atomic
 
 
 def _times(text: str) -> list:
@@ -49,7 +50,10 @@ def replay_command(args) -> int:
     stream.set_log_time_enabled(False)  # sim_time is the one timeline
     stream.set_log_tick_enabled(False)
     if args.save:
-        stream.save(args.save, default_blueprint=blueprint())
+        # in memory, then written atomically: rerun's own file sink truncates an existing
+        # file first, raises on a full disk and hangs at a file size limit
+        rrd = stream.binary_stream()
+        stream.send_blueprint(blueprint())
     elif args.serve:
         sink = rr.GrpcServerSink(bind_ip="127.0.0.1", port=args.port)
         stream.set_sinks(sink, default_blueprint=blueprint())
@@ -67,6 +71,9 @@ def replay_command(args) -> int:
     except RuntimeError as e:  # a viewer that did not start (no display) or went away
         raise SceneError("--spawn", f"the rerun viewer is not reachable ({e}); write a file "
                                     f"with --save OUT.rrd or serve with --serve") from None
+    if args.save:
+        data = rrd.read(flush=True)
+        write_atomic(args.save, lambda f: f.write(data), "--save", mode="wb")
     target = args.save or ("rerun " + sink.uri if args.serve else "the rerun viewer")
     print(f"{frames} frames of {d.recording.path} -> {target}")
     if args.serve:

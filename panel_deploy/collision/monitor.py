@@ -98,7 +98,7 @@ from numba import njit
 
 from ..dynamics.pack import pack
 from ..dynamics.simulate import body_states
-from ..errors import SceneError, TrajectoryError
+from ..errors import SceneError, TrajectoryError, shown
 from ..model import Model
 from .geometry import CERTIFY_TOL, BoxSet, PairGeometry, box_signed_distance, pair_bound
 from .motion import HermiteSegment, PairSpeedBound
@@ -152,10 +152,10 @@ class CollisionSettings:
         for f in ("tolerance", "resolution", "time_resolution", "margin", "noise", "speed_interval"):
             v = getattr(self, f)
             if not v >= 0 or (f in ("resolution", "time_resolution") and v == 0):
-                raise SceneError(f"collision.{f}", f"expected a number > 0, got {v!r}")
+                raise SceneError(f"collision.{f}", f"expected a number > 0, got {shown(v)}")
         if not (math.isfinite(self.noise) and self.noise < 0.1):
             raise SceneError("collision.noise", f"expected a standard deviation below 0.1 rad, "
-                                                f"got {self.noise!r}")
+                                                f"got {shown(self.noise)}")
         if not math.isfinite(self.speed_interval):
             raise SceneError("collision.speed_interval", "expected a finite number of s, got inf")
         if self.margin < self.tolerance:

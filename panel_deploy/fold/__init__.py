@@ -18,7 +18,7 @@ from __future__ import annotations
 import numbers
 from collections.abc import Iterator
 
-from ..errors import DesignError
+from ..errors import DesignError, shown
 from .circuits import (
     canonical_form,
     circuit_by_index,
@@ -132,7 +132,7 @@ def design(rows: int, cols: int, circuit=0, ground=None, merge="auto") -> FoldDe
     if isinstance(circuit, numbers.Integral) and not isinstance(circuit, bool):
         circ = circuit_by_index(rows, cols, int(circuit))
     elif isinstance(circuit, (str, bytes)) or circuit is None or isinstance(circuit, bool):
-        raise DesignError(f"circuit: expected an index or a list of cells, got {circuit!r}")
+        raise DesignError(f"circuit: expected an index or a list of cells, got {shown(circuit)}")
     else:
         circ = validate_circuit(rows, cols, circuit)
     return _design_of(rows, cols, circ, ground, merge)

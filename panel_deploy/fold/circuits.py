@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 
-from ..errors import DesignError
+from ..errors import DesignError, shown
 from .design import Cell
 from .grid import are_adjacent, check_cell, check_size, edge
 
@@ -345,7 +345,7 @@ def circuit_by_index(rows: int, cols: int, index: int) -> tuple[Cell, ...]:
     """
     rows, cols = check_size(rows, cols)
     if isinstance(index, bool) or not isinstance(index, int) or index < 0:
-        raise DesignError(f"circuit index: expected an integer >= 0, got {index!r}")
+        raise DesignError(f"circuit index: expected an integer >= 0, got {shown(index)}")
     for i, circ in enumerate(circuits(rows, cols)):
         if i == index:
             return circ
@@ -405,7 +405,7 @@ def validate_circuit(rows: int, cols: int, circuit) -> tuple[Cell, ...]:
     try:
         seq = [check_cell(p, rows, cols) for p in circuit]
     except TypeError:
-        raise DesignError(f"circuit: expected a sequence of (row, col) cells, got {circuit!r}") from None
+        raise DesignError(f"circuit: expected a sequence of (row, col) cells, got {shown(circuit)}") from None
     if len(seq) > 1 and seq[0] == seq[-1]:
         seq = seq[:-1]
     n = rows * cols

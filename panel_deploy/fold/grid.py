@@ -10,7 +10,7 @@ import numbers
 
 import networkx as nx
 
-from ..errors import DesignError
+from ..errors import DesignError, shown
 from .design import Cell
 
 
@@ -34,7 +34,7 @@ def check_size(rows, cols) -> tuple[int, int]:
     """
     for name, value in (("rows", rows), ("cols", cols)):
         if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
-            raise DesignError(f"{name}: expected an integer >= 1, got {value!r}")
+            raise DesignError(f"{name}: expected an integer >= 1, got {shown(value)}")
     return int(rows), int(cols)
 
 
@@ -60,13 +60,13 @@ def check_cell(cell, rows: int, cols: int) -> Cell:
     try:
         r, c = cell
     except (TypeError, ValueError):
-        raise DesignError(f"cell {cell!r}: expected a (row, col) pair") from None
+        raise DesignError(f"cell {shown(cell)}: expected a (row, col) pair") from None
     for v in (r, c):
         if isinstance(v, bool) or not isinstance(v, numbers.Integral):
-            raise DesignError(f"cell {cell!r}: row and column must be integers")
+            raise DesignError(f"cell {shown(cell)}: row and column must be integers")
     if not (1 <= r <= rows and 1 <= c <= cols):
         raise DesignError(
-            f"cell {cell!r} is outside the {rows} x {cols} array "
+            f"cell {shown(cell)} is outside the {rows} x {cols} array "
             f"(rows 1..{rows}, columns 1..{cols})"
         )
     return (int(r), int(c))

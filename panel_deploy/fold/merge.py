@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..errors import DesignError
+from ..errors import DesignError, shown
 from .design import Cell, Merge, StowedState
 from .grid import are_adjacent, check_cell, edge, shared_edges
 from .kutzbach import body_joints
@@ -103,7 +103,7 @@ def merge_cells(
     all_cells = [(r, c) for r in range(1, rows + 1) for c in range(1, cols + 1)]
     if isinstance(merge, str):
         if merge not in ("auto", "none"):
-            raise DesignError(f"merge: expected 'auto', 'none' or a list of cell pairs, got {merge!r}")
+            raise DesignError(f"merge: expected 'auto', 'none' or a list of cell pairs, got {shown(merge)}")
         explicit = False
         pairs = shared_edges(rows, cols) if merge == "auto" else []
     else:
@@ -112,12 +112,12 @@ def merge_cells(
         try:
             items = list(merge)
         except TypeError:
-            raise DesignError(f"merge: expected 'auto', 'none' or a list of cell pairs, got {merge!r}") from None
+            raise DesignError(f"merge: expected 'auto', 'none' or a list of cell pairs, got {shown(merge)}") from None
         for item in items:
             try:
                 u, v = item
             except (TypeError, ValueError):
-                raise DesignError(f"merge: expected a pair of cells, got {item!r}") from None
+                raise DesignError(f"merge: expected a pair of cells, got {shown(item)}") from None
             u, v = check_cell(u, rows, cols), check_cell(v, rows, cols)
             if not are_adjacent(u, v):
                 raise DesignError(f"merge: cells {u} and {v} do not share an edge")

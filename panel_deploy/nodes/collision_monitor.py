@@ -26,7 +26,7 @@ from visualization_msgs.msg import MarkerArray
 
 from ..build import build_model
 from ..collision import CollisionSettings, StreamCheck
-from ..errors import PanelDeployError, SceneError
+from ..errors import PanelDeployError, SceneError, shown
 from ..kinematics import forward_kinematics
 from ..live import Throttle, scene_from_yaml
 from . import messages, runtime
@@ -69,9 +69,9 @@ class CollisionMonitorNode(Node):
         section = self.scene.collision if self.scene is not None else CollisionSettings()
         tolerance = section.tolerance if p["tolerance"] < 0 else p["tolerance"]
         if not math.isfinite(tolerance):
-            raise SceneError("tolerance", f"expected a finite number, got {tolerance!r}")
+            raise SceneError("tolerance", f"expected a finite number, got {shown(tolerance)}")
         if p["stamps"] not in ("header", "receipt"):
-            raise SceneError("stamps", f"expected header or receipt, got {p['stamps']!r}")
+            raise SceneError("stamps", f"expected header or receipt, got {shown(p['stamps'])}")
         interval = p["speed_interval"]
         if interval < 0:
             sim = self.scene.simulation if self.scene is not None else None

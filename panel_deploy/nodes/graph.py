@@ -293,6 +293,9 @@ def _run(scene_file, optimise, real_time_factor, rate_hz, as_json, record, names
         return 1
     if driver.summary is not None:
         print(json.dumps(driver.summary) if as_json else deployment_text(driver.summary))
+    if recorder is not None and recorder.failed is not None:
+        print(f"panel-deploy: error: {recorder.failed}", file=sys.stderr)
+        return 2
     if interrupted.is_set() or driver.summary is None:
         print("panel-deploy: interrupted", file=sys.stderr)
         return 130

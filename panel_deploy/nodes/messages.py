@@ -20,7 +20,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..errors import TrajectoryError
+from ..errors import TrajectoryError, shown
 from ..record.messages import PANEL_COLOUR, event_fields, status_value
 from ..record.messages import ground_transform, quaternions, tree_transforms
 
@@ -101,7 +101,7 @@ def read_joint_state(msg: JointState, names) -> tuple:
         raise TrajectoryError("name: a joint is named twice")
     unknown = sorted(set(msg.name) - set(names))
     if unknown:
-        raise TrajectoryError(f"name: unknown joint {unknown[0]!r}")
+        raise TrajectoryError(f"name: unknown joint {shown(unknown[0])}")
     if len(msg.position) != n:
         raise TrajectoryError(f"position: {len(msg.position)} values for {n} names")
     if len(msg.velocity) not in (0, n):

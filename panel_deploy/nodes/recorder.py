@@ -22,7 +22,7 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from ..build import build_model
-from ..errors import PanelDeployError
+from ..errors import PanelDeployError, TrajectoryError
 from ..kinematics import forward_kinematics
 from ..live import scene_from_yaml
 from ..record import messages as recorded
@@ -56,6 +56,8 @@ class RecorderNode(Node):
         for topic, (typename, _) in recorded.TOPICS.items():  # every topic, even one left empty
             self.recorder.channel(topic, typename)
         self.model = None
+        #: Why the recording stopped (the file could not be written), or None.
+        self.failed = None
         self.now = 0  # ns of simulated time
         self.received = {recorded_name(topic): 0 for topic in TOPICS}
         for topic, (msg_type, qos) in TOPICS.items():
@@ -66,6 +68,16 @@ class RecorderNode(Node):
         typename = recorded.TOPICS[topic][0]
 
         def write(data):
+            self.received[topic] += 1  # the run waits for the recorder, file or not
+            if self.failed is not None:
+                return
+            try:
+                record(data)
+            except TrajectoryError as e:  # disk full: the run goes on, reported at its end
+                self.failed = str(e)
+                self.get_logger().error(f"recording stopped: {e}")
+
+        def record(data):
             data = recorded.trim(data, typename)
             if topic in ("/joint_states", "/clock"):
                 message = recorded.deserialize(data, typename)
@@ -76,7 +88,6 @@ class RecorderNode(Node):
             elif topic == "/panel_deploy/model":
                 self._model(recorded.deserialize(data, typename).data)
             self.recorder.write(topic, typename, data, self.now)
-            self.received[topic] += 1
         return write
 
     def _model(self, text):
@@ -107,6 +118,9 @@ class RecorderNode(Node):
         """Write the ``outcome`` metadata record (if given) and the file's summary."""
         if self.recorder.closed:
             return
-        if outcome is not None:
-            self.recorder.metadata("outcome", outcome)
-        self.recorder.close()
+        try:
+            if outcome is not None:
+                self.recorder.metadata("outcome", outcome)
+            self.recorder.close()
+        except TrajectoryError as e:
+            self.failed = str(e)

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..errors import OptimisationError
+from ..errors import OptimisationError, shown
 
 FORMAT = "panel_deploy.stiffness/1"
 #: Every top-level key a result file may have (what :func:`result_to_dict` and
@@ -153,7 +153,7 @@ def load_hinges(path, model) -> tuple:
         raise OptimisationError(f"{where}: expected a mapping with a 'hinges' mapping "
                                 f"(hinge name -> k), as written by panel-deploy optimise")
     if "format" in data and data["format"] != FORMAT:
-        raise OptimisationError(f"{where}: format: expected {FORMAT}, got {data['format']!r}")
+        raise OptimisationError(f"{where}: format: expected {FORMAT}, got {shown(data['format'])}")
     # A hand-written file (no format) gets no unknown key past: a misspelt key
     # would be ignored silently. Files save_result wrote may carry extra sections.
     unknown = [str(key) for key in data if key not in RESULT_KEYS] if "format" not in data else []
@@ -184,7 +184,7 @@ def load_hinges(path, model) -> tuple:
             if isinstance(value, bool) or not isinstance(value, (int, float)) \
                     or not math.isfinite(value) or value < 0:
                 raise OptimisationError(f"{where}: hinges.{name}.{key}: expected a finite number "
-                                        f">= 0 {unit}, got {value!r}")
+                                        f">= 0 {unit}, got {shown(value)}")
             out[i] = value
         return out
 

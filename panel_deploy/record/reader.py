@@ -13,20 +13,26 @@ from __future__ import annotations
 
 import mmap
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from io import BytesIO
 from pathlib import Path
 
 import numpy as np
+import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
-from ..errors import PanelDeployError, TrajectoryError
+from ..errors import PanelDeployError, TrajectoryError, shown
 from . import messages
 
 MAGIC = b"\x89MCAP0\r\n"
+#: Largest uncompressed chunk read. Writers close chunks at a few MiB (this
+#: package at 4 MiB, rosbag2 at 768 KiB); a chunk is inflated whole and split
+#: record by record in Python, so a 1 GiB chunk of zeros (30 kB compressed)
+#: would take gigabytes and minutes.
+MAX_CHUNK_BYTES = 32 << 20
 
 
 def is_mcap(path) -> bool:
@@ -92,7 +98,7 @@ class Recording:
                                   f"expected {typename}")
         if self.encodings[topic] != "cdr":
             raise TrajectoryError(f"{self.path}: {topic} is encoded as "
-                                  f"{self.encodings[topic]!r}, expected ROS 2 'cdr'")
+                                  f"{shown(self.encodings[topic])}, expected ROS 2 'cdr'")
         out = []
         for i, (log_time, data) in enumerate(self._raw.get(topic, ())):
             try:
@@ -196,13 +202,40 @@ def _read_records(recording: Recording, data, size: int) -> None:
 def _parse(opcode: int, body, length: int) -> list:
     stream = ReadDataStream(BytesIO(body))
     if opcode == Opcode.CHUNK:
-        return breakup_chunk(Chunk.read(stream), validate_crc=True)
+        return breakup_chunk(_bounded(Chunk.read(stream)), validate_crc=True)
     if opcode == Opcode.MESSAGE:
         return [Message.read(stream, length)]
     for record in (Header, Schema, Channel, Metadata):
         if opcode == getattr(Opcode, record.__name__.upper()):
             return [record.read(stream)]
     return []  # indexes, statistics, summary records, attachments: not needed here
+
+
+def _bounded(chunk: Chunk) -> Chunk:
+    """``chunk`` with its data decompressed, refused if it declares or holds
+    more than :data:`MAX_CHUNK_BYTES` (the compressed frame's own size field is
+    not trusted either: never more than the declared size is inflated). The
+    caller names the file and the record's position."""
+    if chunk.uncompressed_size > MAX_CHUNK_BYTES:
+        raise TrajectoryError(f"it declares {chunk.uncompressed_size} bytes uncompressed, "
+                              f"above the reader's limit of {MAX_CHUNK_BYTES}")
+    if chunk.compression == "zstd":
+        with zstandard.ZstdDecompressor().stream_reader(chunk.data) as stream:
+            data = stream.read(chunk.uncompressed_size + 1)
+    elif chunk.compression == "lz4":
+        try:
+            import lz4.frame
+        except ImportError:  # mcap's optional codec: breakup_chunk reports it missing
+            return chunk
+        data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data,
+                                                          max_length=chunk.uncompressed_size + 1)
+    else:
+        return chunk
+    if len(data) != chunk.uncompressed_size:
+        held = "more" if len(data) > chunk.uncompressed_size else len(data)
+        raise TrajectoryError(f"it declares {chunk.uncompressed_size} bytes uncompressed but "
+                              f"holds {held}")
+    return replace(chunk, compression="", data=data)
 
 
 @dataclass
@@ -280,7 +313,7 @@ def _order(given, names, where):
     if sorted(given) != sorted(names):
         extra = sorted(set(given) - set(names)) or sorted(set(names) - set(given))
         raise TrajectoryError(f"{where}: joints {given} are not those of message 0 "
-                              f"(differs in {extra[0]!r})")
+                              f"(differs in {shown(extra[0])})")
     return [given.index(name) for name in names]
 
 
@@ -323,8 +356,8 @@ def hinge_track(states: JointStates, model, path, scene_name: str = "") -> Hinge
     unknown = [name for name in states.names if name not in known]
     missing = [name for name in tree if name not in states.names]
     if unknown or missing:
-        what = (f"joint {unknown[0]!r} is not a hinge of {label}" if unknown else
-                f"hinge {missing[0]!r} of {label} is missing")
+        what = (f"joint {shown(unknown[0])} is not a hinge of {label}" if unknown else
+                f"hinge {shown(missing[0])} of {label} is missing")
         raise TrajectoryError(f"{path}: /joint_states names are not the hinges of {label}: "
                               f"{what} (hinges: {', '.join(known)})")
     index = [states.names.index(name) for name in tree]

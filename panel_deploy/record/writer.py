@@ -16,12 +16,22 @@ Chunks close after :attr:`Recorder.chunk_span` seconds of log time (and at
 once (:mod:`.mcap_file` writes the records): a process killed at any moment
 leaves every closed chunk readable, so at most ``chunk_span`` of log time
 (plus the samples in flight) is lost.
+
+The file is written as ``STEM.XXXXXXXX.part.mcap`` (random X) in the target's
+folder and renamed to the target when closed: an existing recording is
+replaced only by a whole one, two recorders of one target leave one whole
+file (the last to finish), and a killed process leaves its recording under
+the ``.part.mcap`` name (no summary: see README, recordings). If writing
+fails (disk full, file size limit), the partial file is removed and the
+target left as it was.
 """
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import json
+import os
 import shlex
 import sys
 from importlib.metadata import version
@@ -31,6 +41,7 @@ import yaml
 
 from .. import __version__
 from ..errors import TrajectoryError
+from ..validate import in_place, temporary_beside
 from . import messages
 from .mcap_file import McapFile
 
@@ -66,7 +77,8 @@ class Recorder:
     Parameters
     ----------
     path : str or Path
-        The ``.mcap`` file; an existing file is overwritten.
+        The ``.mcap`` file; an existing file is replaced when the recording
+        is closed (written in place if ``path`` is a device or a pipe).
     chunk_span : float
         s of log time after which the open chunk is closed and flushed.
     chunk_bytes : int
@@ -75,24 +87,48 @@ class Recorder:
     Raises
     ------
     TrajectoryError
-        The file cannot be created.
+        The file cannot be created, or (from any method) written.
     """
 
     def __init__(self, path, *, chunk_span: float = 0.25, chunk_bytes: int = 4 << 20):
         self.path = Path(path)
         self.chunk_span = chunk_span
         self.chunk_bytes = chunk_bytes
-        try:
-            self._stream = open(self.path, "wb")
-        except OSError as e:
-            raise TrajectoryError(f"{self.path}: cannot write the recording ({e.strerror})") from None
-        self._file = McapFile(self._stream, "ros2", f"panel_deploy {__version__}")
+        #: Where the recording is written until :meth:`close` renames it to
+        #: :attr:`path` (None: written in place).
+        self.partial = None
+        self.closed = False
+        with self._writing():
+            if in_place(self.path):
+                self._stream = open(self.path, "wb")
+            else:
+                fd, self.partial = temporary_beside(self.path, f"{self.path.stem}.",
+                                                    f".part{self.path.suffix}")
+                self._stream = os.fdopen(fd, "wb")
+            self._file = McapFile(self._stream, "ros2", f"panel_deploy {__version__}")
         self._schemas: dict = {}    # type name -> schema id
         self._channels: dict = {}   # topic -> (channel id, type name)
         self._counts: dict = {}     # topic -> messages
         self._chunk_start = None    # log time (ns) of the open chunk's first message
         self.first_time = self.last_time = None
-        self.closed = False
+
+    @contextlib.contextmanager
+    def _writing(self):
+        """File errors as one TrajectoryError, the partial file removed: a
+        recording that cannot be written whole is not left half written."""
+        try:
+            yield
+        except OSError as e:
+            self.closed = True
+            with contextlib.suppress(OSError, AttributeError):
+                self._stream.close()
+            if self.partial is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(self.partial)
+            kept = (f"; {self.path} is unchanged" if self.partial is not None and self.path.exists()
+                    else "")
+            raise TrajectoryError(f"{self.path}: cannot write the recording "
+                                  f"({e.strerror or e}){kept}") from None
 
     def channel(self, topic: str, typename: str) -> int:
         """The channel id of ``topic`` (registered on first use with ``typename``).
@@ -107,14 +143,15 @@ class Recorder:
             if known != typename:
                 raise TrajectoryError(f"{self.path}: {topic} is {known}, cannot also record {typename}")
             return cid
-        if typename not in self._schemas:
-            self._schemas[typename] = len(self._schemas) + 1
-            self._file.schema(self._schemas[typename], typename, "ros2msg",
-                              messages.msgdef(typename).encode())
-        cid = len(self._channels) + 1
-        self._file.channel(cid, self._schemas[typename], topic, "cdr",
-                           {"offered_qos_profiles": _yaml(_qos_for(topic)),
-                            "topic_type_hash": messages.type_hash(typename)})
+        with self._writing():
+            if typename not in self._schemas:
+                self._schemas[typename] = len(self._schemas) + 1
+                self._file.schema(self._schemas[typename], typename, "ros2msg",
+                                  messages.msgdef(typename).encode())
+            cid = len(self._channels) + 1
+            self._file.channel(cid, self._schemas[typename], topic, "cdr",
+                               {"offered_qos_profiles": _yaml(_qos_for(topic)),
+                                "topic_type_hash": messages.type_hash(typename)})
         self._channels[topic] = (cid, typename)
         self._counts[topic] = 0
         return cid
@@ -154,14 +191,16 @@ class Recorder:
 
     def flush(self) -> None:
         """Close the open chunk and hand everything written to the operating system."""
-        self._file.close_chunk()
+        with self._writing():
+            self._file.close_chunk()
         self._chunk_start = None
 
     def metadata(self, name: str, values: dict) -> None:
         """An MCAP metadata record: ``values`` become strings (JSON, which is
         also YAML, for anything but a string). Written at once, between chunks."""
-        self._file.metadata(name, {str(k): v if isinstance(v, str) else json.dumps(v)
-                                   for k, v in values.items()})
+        with self._writing():
+            self._file.metadata(name, {str(k): v if isinstance(v, str) else json.dumps(v)
+                                       for k, v in values.items()})
 
     def bag_metadata(self) -> dict:
         """rosbag2's ``BagMetadata`` (version 9) of what has been written."""
@@ -188,13 +227,17 @@ class Recorder:
         }
 
     def close(self) -> None:
-        """Write the summary (indexes, statistics) and the rosbag2 metadata record; close the file."""
+        """Write the summary (indexes, statistics) and the rosbag2 metadata record;
+        close the file and rename it to :attr:`path`."""
         if self.closed:
             return
         self.flush()
-        self._file.metadata("rosbag2", {"serialized_metadata": _yaml(self.bag_metadata())})
-        self._file.finish()
-        self._stream.close()
+        self.metadata("rosbag2", {"serialized_metadata": _yaml(self.bag_metadata())})
+        with self._writing():
+            self._file.finish()
+            self._stream.close()
+            if self.partial is not None:
+                os.replace(self.partial, self.path)
         self.closed = True
 
     def __enter__(self):

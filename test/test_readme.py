@@ -165,7 +165,8 @@ def test_the_readme_pictures_are_committed_and_small():
 
 
 def test_the_readme_stays_short():
-    assert len(_read(ROOT / "README.md").splitlines()) <= 220
+    # A user document: the node suite's tables and the recording rules took it past 220.
+    assert len(_read(ROOT / "README.md").splitlines()) <= 230
 
 
 # --- the checks themselves catch what they are for -----------------------------------------

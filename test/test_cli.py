@@ -165,25 +165,74 @@ def test_sigterm_during_optimise_saves_the_best_so_far(tmp_path):
     assert k.shape == (12,) and np.all(k > 0)
 
 
-def test_sigterm_inside_numbas_callback_is_delivered_again_later():
+def _frames(*modules):
+    """A fake stack: the first module's frame on top, called by the next, and so on
+    (``name:<string>``: code ``exec`` runs from a string in module ``name``)."""
+    from types import SimpleNamespace
+    frame = None
+    for name in reversed(modules):
+        name, _, filename = name.partition(":")
+        code = SimpleNamespace(co_filename=filename or "x.py",
+                               co_name="<module>" if filename else "f")
+        frame = SimpleNamespace(f_globals={"__name__": name}, f_code=code, f_back=frame)
+    return frame
+
+
+@pytest.mark.parametrize("stack, deferred", [
+    (("panel_deploy.x", "__main__"), False),
+    (("numpy.core", "panel_deploy.x"), False),
+    (("numba.core.serialize", "panel_deploy.x"), True),
+    # a ctypes callback of llvmlite's called from numba's cache loading
+    (("llvmlite.binding.executionengine", "numba.core.codegen", "panel_deploy.x"), True),
+    # ours, run by an import in progress: a C extension's initialisation may be under it
+    (("panel_deploy.dynamics", "importlib._bootstrap", "panel_deploy.cli"), True),
+    # rosbags' serialiser code, exec'd from a string while the recording starts
+    (("tmpmod:<string>", "rosbags.serde.utils", "panel_deploy.record"), True),
+    (("__main__:<string>",), False),  # python -c: the whole program is such a string
+])
+def test_interrupts_are_deferred_under_numba_llvmlite_an_import_or_exec(stack, deferred):
+    from panel_deploy.cli import deferring
+    assert deferring(_frames(*stack)) is deferred
+
+
+def test_a_deferred_interrupt_is_raised_once_back_in_our_code():
     # Raised inside numba's unpickling callback, the KeyboardInterrupt would
     # become a SystemError; the handler must defer it, not drop it.
     import signal
     import time
-    from types import SimpleNamespace
 
-    from panel_deploy.cli import _interrupt
+    from panel_deploy.cli import Interrupts
 
-    previous = signal.signal(signal.SIGTERM, _interrupt)
+    interrupts = Interrupts()
+    interrupts.install()
     try:
+        assert interrupts(signal.SIGTERM, _frames("numba.core.serialize", "x")) is None
+        assert interrupts.received == signal.SIGTERM and not interrupts.raised
         with pytest.raises(KeyboardInterrupt):
-            _interrupt(signal.SIGTERM, SimpleNamespace(f_globals={"__name__": "panel_deploy.x"}))
-        inside_numba = SimpleNamespace(f_globals={"__name__": "numba.core.serialize"})
-        assert _interrupt(signal.SIGTERM, inside_numba) is None
-        with pytest.raises(KeyboardInterrupt):
-            time.sleep(2.0)
+            time.sleep(2.0)  # the SIGALRM retry finds this test's frame
+        assert interrupts.raised
+        interrupts.over = True  # the command has ended: nothing left to stop
+        assert interrupts(signal.SIGINT, _frames("x")) is None
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        interrupts.restore()
+    assert signal.getsignal(signal.SIGTERM) is not interrupts
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+
+
+def test_an_interrupt_deferred_to_the_end_still_ends_the_command(capsys, monkeypatch):
+    # The signal came while the last kernel loaded and the command then
+    # finished: it is not dropped (the run counts as interrupted).
+    import signal
+
+    import panel_deploy.cli as cli
+
+    def loads_until_the_end(args):
+        signal.getsignal(signal.SIGTERM)(signal.SIGTERM, _frames("numba.core.caching"))
+        signal.setitimer(signal.ITIMER_REAL, 0)  # the command ends before the retry
+        return 0
+    monkeypatch.setattr(cli, "_schema", loads_until_the_end)
+    code, _, err = run(capsys, "schema")
+    assert code == 130 and err == "panel-deploy: interrupted\n"
 
 
 # --- issue 19: every bad input is one line naming the field, exit 2, before any work ---

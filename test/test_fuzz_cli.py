@@ -4,6 +4,9 @@ Random scene mutations, random ``--set`` values, random byte corruptions of
 scene, result and trajectory files, run through :func:`panel_deploy.cli.main`
 in-process. Each run must end with exit 0 or 1 and a finite answer, or exit 2
 with exactly one line on stderr; never a traceback (any other exception fails).
+SIGINT or SIGTERM at a random moment of a recorded simulation (a child
+process) must end it within :data:`PROMPT_S` with exit 130 and the one line
+``panel-deploy: interrupted``, or find it already done (0 or 1).
 
 The example budget is fixed and the examples derandomised, so CI runs the same
 cases every time in well under a minute; ``bench/fuzz_cli.py`` runs the same
@@ -15,6 +18,10 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
+import signal
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -208,6 +215,58 @@ array_names = st.sampled_from(["t", "theta", "omega", "rotation", "position", "c
                                "format_version", "success", "status", "message", "method"])
 
 
+#: The run of issue 26's report: a deployment recorded as it is computed
+#: (numba loads its cached kernels during the first second).
+SIGNALLED = ["simulate", str(PAPER), "--record"]
+#: Longest wait for a signalled run to end once signalled, s (a warm run
+#: takes 2 s in all).
+PROMPT_S = 20.0
+signals = st.sampled_from([signal.SIGTERM, signal.SIGINT])
+signal_delays = st.floats(0.05, 1.2)
+
+
+def _handles_signals(pid) -> bool:
+    """Whether process ``pid`` has left Python's start-up for the command, whose
+    handler of SIGTERM it then shows in /proc (Linux), or has ended."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return True
+    caught = int(status.split("SigCgt:", 1)[1].split()[0], 16)
+    return bool(caught >> (signal.SIGTERM - 1) & 1)
+
+
+def case_signal(signum, delay):
+    """``SIGNALLED`` in a child process, sent ``signum`` ``delay`` s after its start,
+    or once past Python's own start-up (up to 0.15 s on a busy machine), which
+    meets a signal as Python does (SIGTERM kills, SIGINT prints a traceback)."""
+    name = signal.Signals(signum).name
+    with tempfile.TemporaryDirectory() as tmp:
+        argv = [*SIGNALLED, str(Path(tmp) / "x.mcap")]
+        start = time.perf_counter()
+        proc = subprocess.Popen([sys.executable, "-m", "panel_deploy.cli", *argv], cwd=tmp,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        while not _handles_signals(proc.pid):
+            time.sleep(0.002)
+        time.sleep(max(0.0, delay - (time.perf_counter() - start)))
+        with contextlib.suppress(ProcessLookupError):
+            proc.send_signal(signum)
+        sent = time.perf_counter()
+        try:
+            _, err = proc.communicate(timeout=PROMPT_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            raise Broken(f"signal: {name} at {sent - start:.3f} s: still running {PROMPT_S:g} s "
+                         "later") from None
+    code, lines = proc.returncode, err.strip().splitlines()
+    LOG.append(("signal", code, time.perf_counter() - sent, lines[0] if lines else "",
+                [name, f"{sent - start:.3f}", *argv]))
+    if "Traceback" in err or code not in (0, 1, 130) or (code == 130 and lines != [
+            "panel-deploy: interrupted"]):
+        raise Broken(f"signal: {name} at {sent - start:.3f} s: exit {code}, stderr {err[-500:]!r}")
+
+
 # --- fixtures: one valid result file and one valid trajectory ---
 
 @pytest.fixture(scope="module")
@@ -222,6 +281,17 @@ def make_result_text() -> str:
     names = [h.name for h in build_model(load_scene(PAPER)).hinges]
     return ("format: panel_deploy.stiffness/1\nscene: paper_4x4\nhinges:\n"
             + "".join(f"  {n}: {{k: 0.05, c: 0.00215}}\n" for n in names))
+
+
+@pytest.fixture(scope="module")
+def signalled_kernels(tmp_path_factory):
+    """The kernels of :data:`SIGNALLED` compiled, so that a signal meets their loading."""
+    warm_kernels(tmp_path_factory.mktemp("signals") / "x.mcap")
+
+
+def warm_kernels(record) -> None:
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main([*SIGNALLED, str(record)]) in (0, 1)
 
 
 @pytest.fixture(scope="module")
@@ -274,6 +344,12 @@ def test_fuzz_trajectory_bytes(trajectory, ops):
 @given(name=array_names, value=arrays)
 def test_fuzz_trajectory_arrays(trajectory, name, value):
     case_trajectory_arrays(name, value, trajectory)
+
+
+@settings(CI, max_examples=20)
+@given(signum=signals, delay=signal_delays)
+def test_fuzz_signals_at_random_times(signalled_kernels, signum, delay):
+    case_signal(signum, delay)
 
 
 def test_the_contract_check_can_fail(monkeypatch):

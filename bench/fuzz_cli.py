@@ -1,10 +1,12 @@
 """Deeper run of the CLI fuzz test (test/test_fuzz_cli.py): same properties, larger budget.
 
-    python bench/fuzz_cli.py [--examples N] [--seed S]
+    python bench/fuzz_cli.py [--examples N] [--seed S] [--only PROPERTY ...]
 
-Runs every property of the test module with N examples each (random, not the
-CI's fixed set), then prints the cases tried, the outcomes by property and exit
-code, the most frequent error lines, and the slowest clean failure (exit 2).
+Runs every property of the test module (or those named) with N examples each
+(random, not the CI's fixed set), then prints the cases tried, the outcomes by
+property and exit code, the most frequent error lines, the slowest clean
+failure (exit 2), and for the signals at random times the longest wait from
+the signal to the exit.
 A broken contract (traceback, several lines, non-finite answer) is shrunk by
 hypothesis and printed; the script then exits 1.
 """
@@ -28,11 +30,16 @@ from hypothesis import strategies as st  # noqa: E402
 
 import test_fuzz_cli as fz  # noqa: E402
 
+PROPERTIES = ["scene mutations", "--set values", "scene bytes", "result bytes",
+              "trajectory bytes", "trajectory arrays", "signals"]
+
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--examples", type=int, default=300, help="examples per property")
     p.add_argument("--seed", type=int, default=None, help="hypothesis seed (default: random)")
+    p.add_argument("--only", nargs="+", metavar="PROPERTY", choices=PROPERTIES,
+                   help=f"run only these properties, of: {', '.join(PROPERTIES)}")
     args = p.parse_args(argv)
 
     from panel_deploy.cli import main as cli
@@ -42,6 +49,7 @@ def main(argv=None) -> int:
              "--set", "simulation.samples=9"])
     trajectory = (tmp / "t.npz").read_bytes()
     result_text = fz.make_result_text()
+    fz.warm_kernels(tmp / "x.mcap")
 
     deep = settings(max_examples=args.examples, deadline=None, database=None,
                     suppress_health_check=list(HealthCheck))
@@ -58,7 +66,10 @@ def main(argv=None) -> int:
             lambda ops: fz.case_trajectory_bytes(ops, trajectory)),
         "trajectory arrays": given(fz.array_names, fz.arrays)(
             lambda name, value: fz.case_trajectory_arrays(name, value, trajectory)),
+        "signals": given(fz.signals, fz.signal_delays)(fz.case_signal),
     }
+    assert list(properties) == PROPERTIES
+    properties = {k: v for k, v in properties.items() if not args.only or k in args.only}
     broken = []
     start = time.perf_counter()
     for label, prop in properties.items():
@@ -77,9 +88,10 @@ def main(argv=None) -> int:
     print(f"{len(fz.LOG)} cases in {wall:.0f} s ({args.examples} examples per property, "
           f"shrinking included)")
     by = collections.Counter((kind, code) for kind, code, *_ in fz.LOG)
-    print(f"{'property':20s} {'exit 0':>7s} {'exit 1':>7s} {'exit 2':>7s}")
+    codes = sorted({code for _, code in by}, key=lambda c: (not isinstance(c, int), str(c)))
+    print(f"{'property':20s} " + " ".join(f"{'exit ' + str(c):>8s}" for c in codes))
     for label in properties:
-        print(f"{label:20s} " + " ".join(f"{by[(label, c)]:7d}" for c in (0, 1, 2)))
+        print(f"{label:20s} " + " ".join(f"{by[(label, c)]:8d}" for c in codes))
     errors = collections.Counter(
         line.split(": error: ", 1)[-1].split(":")[0][:50] for _, code, _, line, _ in fz.LOG
         if code == 2)
@@ -88,6 +100,11 @@ def main(argv=None) -> int:
     if clean:
         kind, _, seconds, line, argv = max(clean, key=lambda x: x[2])
         print(f"slowest clean failure: {seconds:.2f} s ({kind}): {line}")
+    signalled = [x for x in fz.LOG if x[0] == "signals"]
+    if signalled:
+        kind, code, seconds, line, argv = max(signalled, key=lambda x: x[2])
+        print(f"signals: {len(signalled)} runs, longest from the signal to the exit "
+              f"{seconds:.2f} s ({argv[0]} at {argv[1]} s, exit {code})")
     slowest = max(fz.LOG, key=lambda x: x[2])
     print(f"slowest case: {slowest[2]:.2f} s ({slowest[0]}, exit {slowest[1]})")
     for label, message in broken:

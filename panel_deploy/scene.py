@@ -37,6 +37,10 @@ STEP_BUDGET = 2_000_000
 _WHY_SCALE = "values this far from a real panel make the model's numbers degenerate"
 _WHY_STIFF = "beyond this the integrator's step collapses long before the end time"
 _WHY_G = "more than 1000 g makes the deployment a crash, not a run"
+#: Broad-phase margin of the collision check, m (``CollisionSettings.margin``):
+#: a pair farther apart than this is only bounded, never computed, so an
+#: interference tolerance above it could not be told from a miss.
+COLLISION_MARGIN = 0.02
 
 
 # --- field parsers: each takes (value, path) and returns the parsed value or raises ---
@@ -289,7 +293,9 @@ class SimulationSection:
 
 @dataclass(frozen=True)
 class CollisionSection:
-    tolerance: float = spec(1.0e-4, number(0.0), "m",
+    tolerance: float = spec(1.0e-4, number(0.0, COLLISION_MARGIN, why="the collision check's "
+                                            f"broad phase computes pairs only within "
+                                            f"{COLLISION_MARGIN:g} m"), "m",
                             "interference depth beyond which touching panels count as colliding")
     refine: bool = spec(True, boolean, "", "refine between samples so that no collision is missed")
 
@@ -447,7 +453,10 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
 def resolve_scene(name: str) -> Path:
     """A scene path, or the name of a scene shipped with the package (``paper_4x4``)."""
     path = Path(name)
-    if path.exists() or path.suffix:
+    try:
+        if path.exists() or path.suffix:
+            return path
+    except OSError:  # a name too long: reading it says so
         return path
     for base in (Path(__file__).resolve().parent.parent / "config" / "scenes",
                  Path(sys.prefix) / "share" / "panel_deploy" / "config" / "scenes"):
@@ -480,7 +489,7 @@ def load_scene(path, overrides=()) -> Scene:
     except FileNotFoundError:
         raise SceneError(str(path), "scene file not found") from None
     except (OSError, UnicodeDecodeError) as e:
-        raise SceneError(str(path), f"cannot read scene file ({e})") from None
+        raise SceneError(str(path), f"cannot read scene file ({getattr(e, 'strerror', None) or e})") from None
     from .validate import load_yaml, yaml_problem
     try:
         data = load_yaml(text)

@@ -17,6 +17,7 @@ names the field (a flag as the user typed it, a key path, a file and array).
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import tempfile
@@ -108,8 +109,8 @@ def read_text(path, what: str = "file") -> str:
 def check_output_path(path, flag: str) -> Path | None:
     """Check that ``path`` can be written, before any work is done.
 
-    Its folder must exist and be writable and the path must not be a folder
-    (an existing file is replaced). Raises :class:`SceneError` naming ``flag``
+    Its folder must exist and take the temporary file of :func:`write_atomic`
+    and the path must not be a folder (an existing file is replaced). Raises :class:`SceneError` naming ``flag``
     (``--out``). None passes (no output asked for).
     """
     if path is None:
@@ -120,6 +121,14 @@ def check_output_path(path, flag: str) -> Path | None:
     p = Path(text)
     if "\0" in text:
         raise SceneError(flag, f"{text!r} is not a valid path")
+    try:
+        _check_writable(p, text, flag)
+    except OSError as e:  # a name too long, a path through a file, ...
+        raise SceneError(flag, f"cannot write {text}: {e.strerror or e}") from None
+    return p
+
+
+def _check_writable(p: Path, text: str, flag: str) -> None:
     if p.is_dir() or text.endswith(("/", os.sep)):
         raise SceneError(flag, f"{text} is a folder; give a file name")
     parent = p.parent
@@ -131,7 +140,24 @@ def check_output_path(path, flag: str) -> Path | None:
         raise SceneError(flag, f"cannot write {text}: folder {parent} is not writable")
     if p.exists() and not os.access(p, os.W_OK):
         raise SceneError(flag, f"{text} exists and is not writable")
-    return p
+    if not p.exists() or p.is_file():
+        # the temporary file write_atomic will write: the folder may refuse new
+        # files (/proc) or the name with its temporary affixes be too long
+        try:
+            fd, probe = _temporary_file(p)
+        except OSError as e:
+            if e.errno == errno.ENAMETOOLONG:
+                raise
+            raise SceneError(flag, f"cannot write {text}: folder {parent} does not take new "
+                                   f"files ({e.strerror or e})") from None
+        os.close(fd)
+        os.unlink(probe)
+
+
+def _temporary_file(path: Path) -> tuple:
+    """``(fd, name)`` of a new temporary file next to ``path``, for an atomic write."""
+    return tempfile.mkstemp(dir=path.parent if str(path.parent) else Path("."),
+                            prefix=f".{path.name}.", suffix=".part")
 
 
 def fallback_path(path) -> Path:
@@ -172,10 +198,9 @@ def write_atomic(path, write, flag: str = "output", mode: str = "w") -> Path:
         with open(path, mode, **text) as f:
             write(f)
         return path
-    folder = path.parent if str(path.parent) else Path(".")
     tmp = None
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".part")
+        fd, tmp = _temporary_file(path)
         # mkstemp makes the file private (0600); the result gets the mode
         # open() would give it
         os.fchmod(fd, 0o666 & ~_umask())

@@ -296,6 +296,19 @@ def no_work(monkeypatch):
     (["fold", "--rows", "4", "--cols", "4", "--set", "array.rows=x"], "--set: only with --scene"),
     (["fold", "--rows", "40", "--cols", "40"], "--rows/--cols: 40 x 40 is above the enumeration limit"),
     (["fold", "--rows", "4", "--cols", "0"], "--cols: expected an integer >= 1"),
+    # issue 26: names the system refuses, folders that take no files, formats, ports
+    (["simulate", PAPER, "--out", "{tmp}/" + "a" * 300 + ".npz"], "--out: cannot write {tmp}/aaa"),
+    (["simulate", PAPER, "--record", "{tmp}/" + "a" * 300], "a: File name too long"),
+    # the name fits, not with the affixes of the atomic write's temporary file
+    (["simulate", PAPER, "--out", "{tmp}/" + "a" * 250], "a: File name too long"),
+    (["replay", "r.mcap", "--save", "/proc/x.rrd"], "--save: cannot write /proc/x.rrd: folder "
+                                                    "/proc does not take new files"),
+    (["replay", "r.mcap", "--png", "{tmp}/strip.xyz"], "--png: cannot write a picture as .xyz "
+                                                       "(the suffix gives the format: "),
+    (["fold", "--rows", "4", "--cols", "4", "--plot", "{tmp}/d.xyz"], "--plot: cannot write a "
+                                                                      "picture as .xyz"),
+    (["replay", "r.mcap", "--serve", "--port", "70000"], "--port: expected an integer <= 65535"),
+    (["replay", "r.mcap", "--port", "0"], "--port: expected an integer >= 1"),
 ])
 def test_bad_flags_and_output_paths_fail_before_any_work(capsys, tmp_path, no_work, argv, expected):
     fill = {"missing": str(tmp_path / "missing"), "tmp": str(tmp_path)}
@@ -312,11 +325,42 @@ def test_bad_flags_and_output_paths_fail_before_any_work(capsys, tmp_path, no_wo
     ("array.length=1e-300", "--set array.length: expected a number >= 1e-06"),
     ("array.rows=40", "--set array.rows: expected an integer <= 12"),
     ("simulation.t_end=" + "[" * 100 + "]" * 100, "--set simulation.t_end: value"),
+    # issue 26: refused after the whole run before, naming collision.margin (not a scene key)
+    ("collision.tolerance=0.05", "--set collision.tolerance: expected a number <= 0.02, got 0.05 "
+                                 "(limit: the collision check's broad phase"),
 ])
 def test_absurd_values_fail_at_once_naming_the_set_item(capsys, no_work, item, expected):
     line = one_line_error(capsys, ["simulate", PAPER, "--set", item])
     assert expected in line, line
     assert "paper_4x4.yaml" not in line  # a command-line mistake is not blamed on the file
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["simulate", PAPER, "--set", "simulation.t_\nend=1"], "--set simulation.t_\\nend: unknown key"),
+    (["simulate", "pa\nper"], "pa\\nper: scene file not found"),
+    (["simulate", PAPER, "--out", "a\n/t.npz"], "--out: cannot write a\\n/t.npz: folder a\\n"),
+    (["simulate", "x\x1b[2J"], "x\\x1b[2J: scene file not found"),  # shown, not obeyed
+    (["simulate", PAPER, "--stiffness", "k\n.yaml"], "stiffness file 'k\\n.yaml': cannot"),
+])
+def test_control_characters_in_names_stay_on_the_one_line(capsys, no_work, argv, expected):
+    line = one_line_error(capsys, argv)
+    assert line.startswith("panel-deploy: error: " + expected), line
+
+
+def test_a_scene_name_too_long_for_the_system_is_one_line(capsys, no_work):
+    line = one_line_error(capsys, ["simulate", "s" * 300])
+    assert line == f"panel-deploy: error: {'s' * 300}: cannot read scene file (File name too long)"
+
+
+def test_serve_on_a_busy_port_says_so_before_reading(capsys, no_work):
+    import socket
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        line = one_line_error(capsys, ["replay", "missing.mcap", "--serve", "--port", str(port)])
+    assert line.startswith(f"panel-deploy: error: --port: cannot serve on 127.0.0.1:{port} "
+                           "(Address already in use"), line
 
 
 def test_duplicate_scene_sections_are_refused(capsys, tmp_path, no_work):

@@ -45,11 +45,22 @@ def _stiffness_list(text):
     return values
 
 
+#: Control characters as Python writes them in a string's repr (``\n``, ``\x1b``):
+#: a key or path holding one stays on the error's one line, and a terminal
+#: escape in it is shown, not obeyed.
+_ESCAPES = {c: repr(chr(c))[1:-1] for c in (*range(32), 127)}
+
+
+def error_line(message, prog: str = "panel-deploy") -> str:
+    """The one line ``<prog>: error: <message>`` (no newline at its end)."""
+    return f"{prog}: error: {str(message).translate(_ESCAPES)}"
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with its errors as the one line every other error is (no usage block)."""
 
     def error(self, message):
-        self.exit(2, f"{self.prog}: error: {message}\n")
+        self.exit(2, error_line(message, self.prog) + "\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -240,7 +251,7 @@ def main(argv=None) -> int:
             raise KeyboardInterrupt
         return code
     except PanelDeployError as e:
-        print(f"panel-deploy: error: {e}", file=sys.stderr)
+        print(error_line(e), file=sys.stderr)
         return 2
     except BrokenPipeError:  # output piped into head & co.: not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -70,6 +70,7 @@ from ..dynamics.pack import pack
 from ..dynamics.simulate import body_states
 from ..errors import SceneError, TrajectoryError
 from ..model import Model
+from ..scene import COLLISION_MARGIN
 from .geometry import CERTIFY_TOL, BoxSet, PairGeometry, box_signed_distance, pair_bound
 from .motion import HermiteSegment, PairSpeedBound
 from .refine import poses, refine_interval, stack
@@ -100,7 +101,7 @@ class CollisionSettings:
     refine: bool = True
     resolution: float = 1.0e-6
     time_resolution: float = 1.0e-6
-    margin: float = 0.02
+    margin: float = COLLISION_MARGIN
 
     def __post_init__(self):
         for f in ("tolerance", "resolution", "time_resolution", "margin"):

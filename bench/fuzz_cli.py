@@ -31,7 +31,7 @@ from hypothesis import strategies as st  # noqa: E402
 import test_fuzz_cli as fz  # noqa: E402
 
 PROPERTIES = ["scene mutations", "--set values", "scene bytes", "result bytes",
-              "trajectory bytes", "trajectory arrays", "signals"]
+              "trajectory bytes", "trajectory arrays", "output names", "signals"]
 
 
 def main(argv=None) -> int:
@@ -66,6 +66,8 @@ def main(argv=None) -> int:
             lambda ops: fz.case_trajectory_bytes(ops, trajectory)),
         "trajectory arrays": given(fz.array_names, fz.arrays)(
             lambda name, value: fz.case_trajectory_arrays(name, value, trajectory)),
+        "output names": given(st.sampled_from(sorted(fz.OUTPUT_FLAGS)), fz.output_names)(
+            fz.case_output_name),
         "signals": given(fz.signals, fz.signal_delays)(fz.case_signal),
     }
     assert list(properties) == PROPERTIES
@@ -88,7 +90,8 @@ def main(argv=None) -> int:
     print(f"{len(fz.LOG)} cases in {wall:.0f} s ({args.examples} examples per property, "
           f"shrinking included)")
     by = collections.Counter((kind, code) for kind, code, *_ in fz.LOG)
-    codes = sorted({code for _, code in by}, key=lambda c: (not isinstance(c, int), str(c)))
+    codes = sorted({code for _, code in by},
+                   key=lambda c: (0, c, "") if isinstance(c, int) else (1, 0, str(c)))
     print(f"{'property':20s} " + " ".join(f"{'exit ' + str(c):>8s}" for c in codes))
     for label in properties:
         print(f"{label:20s} " + " ".join(f"{by[(label, c)]:8d}" for c in codes))
@@ -102,9 +105,11 @@ def main(argv=None) -> int:
         print(f"slowest clean failure: {seconds:.2f} s ({kind}): {line}")
     signalled = [x for x in fz.LOG if x[0] == "signals"]
     if signalled:
+        waits = sorted(x[2] for x in signalled)
         kind, code, seconds, line, argv = max(signalled, key=lambda x: x[2])
-        print(f"signals: {len(signalled)} runs, longest from the signal to the exit "
-              f"{seconds:.2f} s ({argv[0]} at {argv[1]} s, exit {code})")
+        print(f"signals: {len(signalled)} runs; from the signal to the exit: median "
+              f"{waits[len(waits) // 2]:.2f} s, 95th percentile {waits[int(0.95 * len(waits))]:.2f} "
+              f"s, longest {seconds:.2f} s ({argv[0]} at {argv[1]} s, exit {code})")
     slowest = max(fz.LOG, key=lambda x: x[2])
     print(f"slowest case: {slowest[2]:.2f} s ({slowest[0]}, exit {slowest[1]})")
     for label, message in broken:

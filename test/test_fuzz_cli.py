@@ -215,6 +215,25 @@ array_names = st.sampled_from(["t", "theta", "omega", "rotation", "position", "c
                                "format_version", "success", "status", "message", "method"])
 
 
+#: Commands with an output file, and the flag that names it.
+OUTPUT_FLAGS = {"--out": ["simulate", str(PAPER), "--json", *FAST],
+                "--record": ["simulate", str(PAPER), "--json", *FAST],
+                "--mjcf": ["export", str(PAPER)],
+                "--plot": ["fold", "--rows", "2", "--cols", "2", "--json"]}
+output_names = st.one_of(
+    st.text(max_size=300),
+    st.tuples(st.integers(240, 300), st.sampled_from(["", ".npz", ".png", ".xyz"]))
+    .map(lambda n: "n" * n[0] + n[1]),
+    st.sampled_from([".", "..", "/", "\n", "a\nb.png", "x.PNG", "x.", ".png", "d/x.npz",
+                     "\x1b[2J.xml", "x.rrd"]))
+
+
+def case_output_name(flag, name):
+    """An output flag given ``name`` in a fresh folder (names, not folders, are fuzzed)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        run_cli("output", [*OUTPUT_FLAGS[flag], flag, f"{tmp}/{name}"])
+
+
 #: The run of issue 26's report: a deployment recorded as it is computed
 #: (numba loads its cached kernels during the first second).
 SIGNALLED = ["simulate", str(PAPER), "--record"]
@@ -344,6 +363,12 @@ def test_fuzz_trajectory_bytes(trajectory, ops):
 @given(name=array_names, value=arrays)
 def test_fuzz_trajectory_arrays(trajectory, name, value):
     case_trajectory_arrays(name, value, trajectory)
+
+
+@CI
+@given(st.sampled_from(sorted(OUTPUT_FLAGS)), output_names)
+def test_fuzz_output_names(flag, name):
+    case_output_name(flag, name)
 
 
 @settings(CI, max_examples=20)

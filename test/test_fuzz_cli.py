@@ -1,8 +1,8 @@
 """Fuzz test of the command line's error contract (issue 19), with hypothesis.
 
 Random scene mutations, random ``--set`` values, random byte corruptions of
-scene, result and trajectory files, run through :func:`panel_deploy.cli.main`
-in-process. Each run must end with exit 0 or 1 and a finite answer, or exit 2
+scene, result and trajectory files, random output file names, run through
+:func:`panel_deploy.cli.main` in-process. Each run must end with exit 0 or 1 and a finite answer, or exit 2
 with exactly one line on stderr; never a traceback (any other exception fails).
 SIGINT or SIGTERM at a random moment of a recorded simulation (a child
 process) must end it within :data:`PROMPT_S` with exit 130 and the one line

@@ -226,6 +226,8 @@ class Interrupts:
         self.previous = {sig: signal.signal(sig, self) for sig in self.SIGNALS}
 
     def restore(self):
+        if not self.previous:
+            return  # never installed (a thread other than the main one)
         signal.setitimer(signal.ITIMER_REAL, 0)
         for sig, handler in self.previous.items():
             signal.signal(sig, handler)

@@ -1,10 +1,12 @@
 """Deeper run of the CLI fuzz test (test/test_fuzz_cli.py): same properties, larger budget.
 
-    python bench/fuzz_cli.py [--examples N] [--seed S]
+    python bench/fuzz_cli.py [--examples N] [--seed S] [--only PROPERTY ...]
 
-Runs every property of the test module with N examples each (random, not the
-CI's fixed set), then prints the cases tried, the outcomes by property and exit
-code, the most frequent error lines, and the slowest clean failure (exit 2).
+Runs every property of the test module (or those named) with N examples each
+(random, not the CI's fixed set), then prints the cases tried, the outcomes by
+property and exit code, the most frequent error lines, the slowest clean
+failure (exit 2), and for the signals at random times the longest wait from
+the signal to the exit.
 A broken contract (traceback, several lines, non-finite answer) is shrunk by
 hypothesis and printed; the script then exits 1.
 """
@@ -28,11 +30,16 @@ from hypothesis import strategies as st  # noqa: E402
 
 import test_fuzz_cli as fz  # noqa: E402
 
+PROPERTIES = ["scene mutations", "--set values", "scene bytes", "result bytes",
+              "trajectory bytes", "trajectory arrays", "output names", "signals"]
+
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--examples", type=int, default=300, help="examples per property")
     p.add_argument("--seed", type=int, default=None, help="hypothesis seed (default: random)")
+    p.add_argument("--only", nargs="+", metavar="PROPERTY", choices=PROPERTIES,
+                   help=f"run only these properties, of: {', '.join(PROPERTIES)}")
     args = p.parse_args(argv)
 
     from panel_deploy.cli import main as cli
@@ -42,6 +49,7 @@ def main(argv=None) -> int:
              "--set", "simulation.samples=9"])
     trajectory = (tmp / "t.npz").read_bytes()
     result_text = fz.make_result_text()
+    fz.warm_kernels(tmp / "x.mcap")
 
     deep = settings(max_examples=args.examples, deadline=None, database=None,
                     suppress_health_check=list(HealthCheck))
@@ -66,7 +74,12 @@ def main(argv=None) -> int:
         "chunk sizes": given(fz.chunk_sizes, st.integers(0, 2**20))(fz.case_chunk_size),
         "same path": given(st.sampled_from(sorted(fz.SAME_PATH)), st.sampled_from(fz.PATH_FORMS))(
             fz.case_same_path),
+        "output names": given(st.sampled_from(sorted(fz.OUTPUT_FLAGS)), fz.output_names)(
+            fz.case_output_name),
+        "signals": given(fz.signals, fz.signal_delays)(fz.case_signal),
     }
+    assert list(properties) == PROPERTIES
+    properties = {k: v for k, v in properties.items() if not args.only or k in args.only}
     broken = []
     start = time.perf_counter()
     for label, prop in properties.items():
@@ -85,9 +98,11 @@ def main(argv=None) -> int:
     print(f"{len(fz.LOG)} cases in {wall:.0f} s ({args.examples} examples per property, "
           f"shrinking included)")
     by = collections.Counter((kind, code) for kind, code, *_ in fz.LOG)
-    print(f"{'property':20s} {'exit 0':>7s} {'exit 1':>7s} {'exit 2':>7s}")
+    codes = sorted({code for _, code in by},
+                   key=lambda c: (0, c, "") if isinstance(c, int) else (1, 0, str(c)))
+    print(f"{'property':20s} " + " ".join(f"{'exit ' + str(c):>8s}" for c in codes))
     for label in properties:
-        print(f"{label:20s} " + " ".join(f"{by[(label, c)]:7d}" for c in (0, 1, 2)))
+        print(f"{label:20s} " + " ".join(f"{by[(label, c)]:8d}" for c in codes))
     errors = collections.Counter(
         line.split(": error: ", 1)[-1].split(":")[0][:50] for _, code, _, line, _ in fz.LOG
         if code == 2)
@@ -96,6 +111,13 @@ def main(argv=None) -> int:
     if clean:
         kind, _, seconds, line, argv = max(clean, key=lambda x: x[2])
         print(f"slowest clean failure: {seconds:.2f} s ({kind}): {line}")
+    signalled = [x for x in fz.LOG if x[0] == "signals"]
+    if signalled:
+        waits = sorted(x[2] for x in signalled)
+        kind, code, seconds, line, argv = max(signalled, key=lambda x: x[2])
+        print(f"signals: {len(signalled)} runs; from the signal to the exit: median "
+              f"{waits[len(waits) // 2]:.2f} s, 95th percentile {waits[int(0.95 * len(waits))]:.2f} "
+              f"s, longest {seconds:.2f} s ({argv[0]} at {argv[1]} s, exit {code})")
     slowest = max(fz.LOG, key=lambda x: x[2])
     print(f"slowest case: {slowest[2]:.2f} s ({slowest[0]}, exit {slowest[1]})")
     for label, message in broken:

@@ -26,7 +26,7 @@ from .dynamics.pack import pack
 from .dynamics.result import SimulationResult, concatenate
 from .errors import SceneError, shown
 from .model import Model
-from .scene import INTEGRATORS, Scene, scene_from_dict
+from .scene import INTEGRATORS, Scene, SimulationSection, apply_overrides, scene_from_dict
 from .validate import load_yaml, yaml_problem
 
 #: Samples per integrator block: 50 ms of simulated time at 200 Hz, small
@@ -91,6 +91,8 @@ class DynamicsParameters:
                                         f"got {shown(self.closure)}")
         if self.rtol >= 1:
             raise SceneError("rtol", f"expected a relative tolerance below 1, got {shown(self.rtol)}")
+        if self.t_end:  # the schema's limit holds before a scene has arrived too
+            SimulationSection.__dataclass_fields__["t_end"].metadata["parse"](self.t_end, "t_end")
 
 
 def apply_stiffness(model: Model, stiffness, damping_ratio: float | None = None) -> Model:
@@ -123,6 +125,12 @@ def _group_text(model, groups):
     return "; ".join(",".join(model.hinges[i].name for i in g) for g in groups)
 
 
+#: The dynamics parameter that sets each scene key :func:`configure` overrides.
+PARAMETER_OF = {"simulation.t_end": "t_end", "simulation.max_step": "t_end",
+                "simulation.samples": "rate_hz", "simulation.method": "method",
+                "simulation.rtol": "rtol", "simulation.atol": "rtol", "closure.method": "closure"}
+
+
 def configure(scene: Scene, params: DynamicsParameters) -> tuple:
     """The scene and model a deployment with ``params`` runs: ``(scene, model)``.
 
@@ -131,24 +139,25 @@ def configure(scene: Scene, params: DynamicsParameters) -> tuple:
     SceneError
         Naming the parameter whose value the scene cannot take.
     """
-    sim, closure = scene.simulation, scene.closure
-    if params.method:
-        sim = replace(sim, method=params.method)
+    sim = scene.simulation
+    t_end = params.t_end or sim.t_end
+    keys = {"simulation.t_end": t_end, "simulation.samples": round(t_end * params.rate_hz) + 1,
+            "simulation.method": params.method, "closure.method": params.closure}
     if params.rtol:
-        sim = replace(sim, rtol=params.rtol, atol=sim.atol * params.rtol / sim.rtol)
-    if params.t_end:
-        sim = replace(sim, t_end=params.t_end)
-    samples = round(sim.t_end * params.rate_hz) + 1
-    if samples < 3:
-        raise SceneError("rate_hz", f"{params.rate_hz:g} Hz over {sim.t_end:g} s gives {samples} "
-                                    f"samples; a deployment needs at least 3")
-    if samples > 1_000_000:
-        raise SceneError("rate_hz", f"{params.rate_hz:g} Hz over {sim.t_end:g} s gives {samples} "
-                                    f"samples; at most 1000000")
-    sim = replace(sim, samples=samples)
-    if params.closure:
-        closure = replace(closure, method=params.closure)
-    scene = scene.replace(simulation=sim, closure=closure)
+        keys.update({"simulation.rtol": params.rtol,
+                     "simulation.atol": sim.atol * params.rtol / sim.rtol})
+    data = apply_overrides(scene.data, [f"{k}={_yaml_value(v)}" for k, v in keys.items() if v])
+    try:  # the limits and cross-key rules of a scene file, as the command line has them
+        scene = scene_from_dict(data, source=scene.source)
+    except SceneError as e:
+        parameter = PARAMETER_OF.get(e.path)
+        if parameter is None:
+            raise
+        if e.path == "simulation.samples":
+            raise SceneError(parameter, f"{params.rate_hz:g} Hz over {t_end:g} s gives "
+                                        f"{keys[e.path]} samples: {e.reason}") from None
+        raise SceneError(parameter, e.reason if e.path.endswith("." + parameter)
+                         else f"{e.reason} (scene key {e.path})") from None
     model = build_model(scene)
     ratio = None if params.damping_ratio < 0 else params.damping_ratio
     return scene, apply_stiffness(model, params.stiffness, ratio)

@@ -37,6 +37,16 @@ STEP_BUDGET = 2_000_000
 _WHY_SCALE = "values this far from a real panel make the model's numbers degenerate"
 _WHY_STIFF = "beyond this the integrator's step collapses long before the end time"
 _WHY_G = "more than 1000 g makes the deployment a crash, not a run"
+#: Least panel density, kg/m^3 (mass over the panel's box): the lightest solids,
+#: aerogels, weigh 0.16 kg/m^3; a lighter panel is no panel, and its time
+#: scales (a 1e-9 kg paper panel on its contact springs: 0.4 microseconds)
+#: only exhaust the integrator's step budget.
+MIN_DENSITY = 0.1
+_WHY_DENSITY = "lighter than any solid (aerogels: 0.16 kg/m^3 and up)"
+#: Broad-phase margin of the collision check, m (``CollisionSettings.margin``):
+#: a pair farther apart than this is only bounded, never computed, so an
+#: interference tolerance above it could not be told from a miss.
+COLLISION_MARGIN = 0.02
 
 
 # --- field parsers: each takes (value, path) and returns the parsed value or raises ---
@@ -144,20 +154,29 @@ def cell_pairs(v, path):
     for i, pair in enumerate(v):
         if not isinstance(pair, (list, tuple)) or len(pair) != 2:
             raise SceneError(f"{path}[{i}]", f"expected a pair of cells, got {shown(pair)}")
-        out.append(tuple(sorted(cell(c, f"{path}[{i}][{j}]") for j, c in enumerate(pair))))
+        pair = tuple(sorted(cell(c, f"{path}[{i}][{j}]") for j, c in enumerate(pair)))
+        if pair in out:  # the same hinge twice is a slip: which other one was meant?
+            raise SceneError(f"{path}[{i}]", f"pair {[list(c) for c in pair]} is given twice "
+                                             f"(first as {path}[{out.index(pair)}])")
+        out.append(pair)
     return tuple(out)
 
 
 def one_of(*parsers, describe):
-    """First parser of ``parsers`` that accepts the value; else the last error."""
+    """First parser of ``parsers`` that accepts the value; else the error of one
+    that took its shape and refused an item (its path names the item), else
+    what was expected."""
     def parse(v, path):
-        err = None
+        errors = []
         for p in parsers:
             try:
                 return p(v, path)
             except SceneError as e:
-                err = e
-        raise SceneError(path, f"expected {describe}, got {shown(v)}") from err
+                errors.append(e)
+        for e in errors:
+            if e.path != path:
+                raise e
+        raise SceneError(path, f"expected {describe}, got {shown(v)}") from errors[-1]
     parse.describe = describe
     return parse
 
@@ -207,7 +226,8 @@ class ArraySection:
     thickness: float = spec(None, _SIZE, "m", "panel thickness t")
     mass: float = spec(None, optional(number(0, 1e6, low_open=True, floor=1e-9, why=_WHY_SCALE)), "kg",
                        "mass of one unit panel (give mass or density)")
-    density: float = spec(None, optional(number(0, 1e6, low_open=True, floor=1e-6, why=_WHY_SCALE)), "kg/m^3",
+    density: float = spec(None, optional(number(0, 1e6, low_open=True, floor=MIN_DENSITY,
+                                                why=_WHY_DENSITY)), "kg/m^3",
                           "panel density (give mass or density)")
 
     @property
@@ -292,7 +312,9 @@ class SimulationSection:
 
 @dataclass(frozen=True)
 class CollisionSection:
-    tolerance: float = spec(1.0e-4, number(0.0), "m",
+    tolerance: float = spec(1.0e-4, number(0.0, COLLISION_MARGIN, why="the collision check's "
+                                            f"broad phase computes pairs only within "
+                                            f"{COLLISION_MARGIN:g} m"), "m",
                             "interference depth beyond which touching panels count as colliding")
     refine: bool = spec(True, boolean, "", "refine between samples so that no collision is missed")
 
@@ -412,6 +434,11 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     _check_required(arr, "array", ("rows", "cols", "length", "width", "thickness"))
     if (arr.mass is None) == (arr.density is None):
         raise SceneError("array.mass", "give exactly one of array.mass and array.density")
+    if arr.mass is not None and arr.mass < MIN_DENSITY * arr.length * arr.width * arr.thickness:
+        raise SceneError("array.mass", f"{arr.mass:g} kg in a {arr.length:g} x {arr.width:g} x "
+                                       f"{arr.thickness:g} m panel is "
+                                       f"{arr.mass / (arr.length * arr.width * arr.thickness):.3g} "
+                                       f"kg/m^3; expected >= {MIN_DENSITY:g} (limit: {_WHY_DENSITY})")
     if (arr.rows * arr.cols) % 2:
         raise SceneError("array", f"{arr.rows} x {arr.cols} = {arr.rows * arr.cols} panels is odd: "
                                   "two equal stacks need an even panel count")
@@ -450,7 +477,10 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
 def resolve_scene(name: str) -> Path:
     """A scene path, or the name of a scene shipped with the package (``paper_4x4``)."""
     path = Path(name)
-    if path.exists() or path.suffix:
+    try:
+        if path.exists() or path.suffix:
+            return path
+    except OSError:  # a name too long: reading it says so
         return path
     for base in (Path(__file__).resolve().parent.parent / "config" / "scenes",
                  Path(sys.prefix) / "share" / "panel_deploy" / "config" / "scenes"):
@@ -483,7 +513,7 @@ def load_scene(path, overrides=()) -> Scene:
     except FileNotFoundError:
         raise SceneError(str(path), "scene file not found") from None
     except (OSError, UnicodeDecodeError) as e:
-        raise SceneError(str(path), f"cannot read scene file ({e})") from None
+        raise SceneError(str(path), f"cannot read scene file ({getattr(e, 'strerror', None) or e})") from None
     from .validate import load_yaml, yaml_problem
     try:
         data = load_yaml(text)

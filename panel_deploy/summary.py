@@ -43,6 +43,9 @@ def deployment_text(s: dict) -> str:
         lines.append(f"never left the stowed angle: {', '.join(s['locked_hinges'])}")
     c = s.get("collision")
     if c is not None:
+        # a failed run's numbers are of its trajectory up to the failure, often
+        # a numerical one: shown, but not as the deployment's outcome
+        partial = "" if s["success"] else " (up to the failure: not a result)"
         first = c["first_collision"]
         d = "none (no pair has cleared the stowed package)" if c["d"] is None else f"{c['d']:.4g} m"
         if first:
@@ -50,9 +53,10 @@ def deployment_text(s: dict) -> str:
             after = (" (after the array first lay flat: the deployment was complete)"
                      if s["time_to_flat"] is not None and first["t"] > s["time_to_flat"] else "")
             lines.append(f"first collision at {first['t']:.4g} s{after} between {' and '.join(first['pair'])}, "
-                         f"approach speed v = {c['v']:.4g} m/s; smallest distance before it d = {d}")
+                         f"approach speed v = {c['v']:.4g} m/s; smallest distance before it d = {d}"
+                         + partial)
         else:
-            lines.append(f"no collision; smallest distance d = {d}")
+            lines.append(f"no collision; smallest distance d = {d}{partial}")
     return "\n".join(lines)
 
 

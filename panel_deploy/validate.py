@@ -21,6 +21,7 @@ names the field (a flag as the user typed it, a key path, a file and array).
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import tempfile
@@ -172,8 +173,8 @@ def read_text(path, what: str = "file") -> str:
 def check_output_path(path, flag: str) -> Path | None:
     """Check that ``path`` can be written, before any work is done.
 
-    Its folder must exist and be writable and the path must not be a folder
-    (an existing file is replaced). Raises :class:`SceneError` naming ``flag``
+    Its folder must exist and take the temporary file of :func:`write_atomic`
+    and the path must not be a folder (an existing file is replaced). Raises :class:`SceneError` naming ``flag``
     (``--out``). None passes (no output asked for).
     """
     if path is None:
@@ -183,7 +184,15 @@ def check_output_path(path, flag: str) -> Path | None:
         raise SceneError(flag, "expected a file name, got an empty string")
     p = Path(text)
     if "\0" in text:
-        raise SceneError(flag, f"{text!r} is not a valid path")
+        raise SceneError(flag, f"{shown(text)} is not a valid path")
+    try:
+        _check_writable(p, text, flag)
+    except OSError as e:  # a name too long, a path through a file, ...
+        raise SceneError(flag, f"cannot write {text}: {e.strerror or e}") from None
+    return p
+
+
+def _check_writable(p: Path, text: str, flag: str) -> None:
     if p.is_dir() or text.endswith(("/", os.sep)):
         raise SceneError(flag, f"{text} is a folder; give a file name")
     parent = p.parent
@@ -195,7 +204,18 @@ def check_output_path(path, flag: str) -> Path | None:
         raise SceneError(flag, f"cannot write {text}: folder {parent} is not writable")
     if p.exists() and not os.access(p, os.W_OK):
         raise SceneError(flag, f"{text} exists and is not writable")
-    return p
+    if not p.exists() or p.is_file():
+        # the temporary file write_atomic will write: the folder may refuse new
+        # files (/proc) or the name with its temporary affixes be too long
+        try:
+            fd, probe = temporary_beside(p, f".{p.name}.", ".part")
+        except OSError as e:
+            if e.errno == errno.ENAMETOOLONG:
+                raise
+            raise SceneError(flag, f"cannot write {text}: folder {parent} does not take new "
+                                   f"files ({e.strerror or e})") from None
+        os.close(fd)
+        os.unlink(probe)
 
 
 def fallback_path(path) -> Path:

@@ -169,25 +169,74 @@ def test_sigterm_during_optimise_saves_the_best_so_far(tmp_path):
     assert k.shape == (12,) and np.all(k > 0)
 
 
-def test_sigterm_inside_numbas_callback_is_delivered_again_later():
+def _frames(*modules):
+    """A fake stack: the first module's frame on top, called by the next, and so on
+    (``name:<string>``: code ``exec`` runs from a string in module ``name``)."""
+    from types import SimpleNamespace
+    frame = None
+    for name in reversed(modules):
+        name, _, filename = name.partition(":")
+        code = SimpleNamespace(co_filename=filename or "x.py",
+                               co_name="<module>" if filename else "f")
+        frame = SimpleNamespace(f_globals={"__name__": name}, f_code=code, f_back=frame)
+    return frame
+
+
+@pytest.mark.parametrize("stack, deferred", [
+    (("panel_deploy.x", "__main__"), False),
+    (("numpy.core", "panel_deploy.x"), False),
+    (("numba.core.serialize", "panel_deploy.x"), True),
+    # a ctypes callback of llvmlite's called from numba's cache loading
+    (("llvmlite.binding.executionengine", "numba.core.codegen", "panel_deploy.x"), True),
+    # ours, run by an import in progress: a C extension's initialisation may be under it
+    (("panel_deploy.dynamics", "importlib._bootstrap", "panel_deploy.cli"), True),
+    # rosbags' serialiser code, exec'd from a string while the recording starts
+    (("tmpmod:<string>", "rosbags.serde.utils", "panel_deploy.record"), True),
+    (("__main__:<string>",), False),  # python -c: the whole program is such a string
+])
+def test_interrupts_are_deferred_under_numba_llvmlite_an_import_or_exec(stack, deferred):
+    from panel_deploy.cli import deferring
+    assert deferring(_frames(*stack)) is deferred
+
+
+def test_a_deferred_interrupt_is_raised_once_back_in_our_code():
     # Raised inside numba's unpickling callback, the KeyboardInterrupt would
     # become a SystemError; the handler must defer it, not drop it.
     import signal
     import time
-    from types import SimpleNamespace
 
-    from panel_deploy.cli import _interrupt
+    from panel_deploy.cli import Interrupts
 
-    previous = signal.signal(signal.SIGTERM, _interrupt)
+    interrupts = Interrupts()
+    interrupts.install()
     try:
+        assert interrupts(signal.SIGTERM, _frames("numba.core.serialize", "x")) is None
+        assert interrupts.received == signal.SIGTERM and not interrupts.raised
         with pytest.raises(KeyboardInterrupt):
-            _interrupt(signal.SIGTERM, SimpleNamespace(f_globals={"__name__": "panel_deploy.x"}))
-        inside_numba = SimpleNamespace(f_globals={"__name__": "numba.core.serialize"})
-        assert _interrupt(signal.SIGTERM, inside_numba) is None
-        with pytest.raises(KeyboardInterrupt):
-            time.sleep(2.0)
+            time.sleep(2.0)  # the SIGALRM retry finds this test's frame
+        assert interrupts.raised
+        interrupts.over = True  # the command has ended: nothing left to stop
+        assert interrupts(signal.SIGINT, _frames("x")) is None
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        interrupts.restore()
+    assert signal.getsignal(signal.SIGTERM) is not interrupts
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+
+
+def test_an_interrupt_deferred_to_the_end_still_ends_the_command(capsys, monkeypatch):
+    # The signal came while the last kernel loaded and the command then
+    # finished: it is not dropped (the run counts as interrupted).
+    import signal
+
+    import panel_deploy.cli as cli
+
+    def loads_until_the_end(args):
+        signal.getsignal(signal.SIGTERM)(signal.SIGTERM, _frames("numba.core.caching"))
+        signal.setitimer(signal.ITIMER_REAL, 0)  # the command ends before the retry
+        return 0
+    monkeypatch.setattr(cli, "_schema", loads_until_the_end)
+    code, _, err = run(capsys, "schema")
+    assert code == 130 and err == "panel-deploy: interrupted\n"
 
 
 # --- issue 19: every bad input is one line naming the field, exit 2, before any work ---
@@ -253,6 +302,19 @@ def no_work(monkeypatch):
     (["fold", "--rows", "4", "--cols", "0"], "--cols: expected an integer >= 1"),
     (["optimise", PAPER, "--perturb", "1" + "0" * 400],
      "--perturb: expected a finite number, got <an integer of about 401 digits>"),
+    # issue 26: names the system refuses, folders that take no files, formats, ports
+    (["simulate", PAPER, "--out", "{tmp}/" + "a" * 300 + ".npz"], "--out: cannot write {tmp}/aaa"),
+    (["simulate", PAPER, "--record", "{tmp}/" + "a" * 300], "a: File name too long"),
+    # the name fits, not with the affixes of the atomic write's temporary file
+    (["simulate", PAPER, "--out", "{tmp}/" + "a" * 250], "a: File name too long"),
+    (["replay", "r.mcap", "--save", "/proc/x.rrd"], "--save: cannot write /proc/x.rrd: folder "
+                                                    "/proc does not take new files"),
+    (["replay", "r.mcap", "--png", "{tmp}/strip.xyz"], "--png: cannot write a picture as .xyz "
+                                                       "(the suffix gives the format: "),
+    (["fold", "--rows", "4", "--cols", "4", "--plot", "{tmp}/d.xyz"], "--plot: cannot write a "
+                                                                      "picture as .xyz"),
+    (["replay", "r.mcap", "--serve", "--port", "70000"], "--port: expected an integer <= 65535"),
+    (["replay", "r.mcap", "--port", "0"], "--port: expected an integer >= 1"),
 ])
 def test_bad_flags_and_output_paths_fail_before_any_work(capsys, tmp_path, no_work, argv, expected):
     fill = {"missing": str(tmp_path / "missing"), "tmp": str(tmp_path)}
@@ -305,11 +367,42 @@ def test_an_output_that_is_an_input_is_refused(capsys, tmp_path, no_work, argv, 
      "--set array.rows: expected an integer, got list ['lol', ['lol', 'lol', 'lol', 'lol', 'lol', "
      "'lol', ...], [['lol', 'lol', 'lol..."),
     ("array.rows=" + alias_flow(), "--set array.rows: value '[&a0 \"lol\", &a1 [*a0, *a0"),
+    # issue 26: refused after the whole run before, naming collision.margin (not a scene key)
+    ("collision.tolerance=0.05", "--set collision.tolerance: expected a number <= 0.02, got 0.05 "
+                                 "(limit: the collision check's broad phase"),
 ])
 def test_absurd_values_fail_at_once_naming_the_set_item(capsys, no_work, item, expected):
     line = one_line_error(capsys, ["simulate", PAPER, "--set", item])
     assert expected in line, line
     assert "paper_4x4.yaml" not in line  # a command-line mistake is not blamed on the file
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["simulate", PAPER, "--set", "simulation.t_\nend=1"], "--set simulation.t_\\nend: unknown key"),
+    (["simulate", "pa\nper"], "pa\\nper: scene file not found"),
+    (["simulate", PAPER, "--out", "a\n/t.npz"], "--out: cannot write a\\n/t.npz: folder a\\n"),
+    (["simulate", "x\x1b[2J"], "x\\x1b[2J: scene file not found"),  # shown, not obeyed
+    (["simulate", PAPER, "--stiffness", "k\n.yaml"], "stiffness file 'k\\n.yaml': cannot"),
+])
+def test_control_characters_in_names_stay_on_the_one_line(capsys, no_work, argv, expected):
+    line = one_line_error(capsys, argv)
+    assert line.startswith("panel-deploy: error: " + expected), line
+
+
+def test_a_scene_name_too_long_for_the_system_is_one_line(capsys, no_work):
+    line = one_line_error(capsys, ["simulate", "s" * 300])
+    assert line == f"panel-deploy: error: {'s' * 300}: cannot read scene file (File name too long)"
+
+
+def test_serve_on_a_busy_port_says_so_before_reading(capsys, no_work):
+    import socket
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        line = one_line_error(capsys, ["replay", "missing.mcap", "--serve", "--port", str(port)])
+    assert line.startswith(f"panel-deploy: error: --port: cannot serve on 127.0.0.1:{port} "
+                           "(Address already in use"), line
 
 
 def test_duplicate_scene_sections_are_refused(capsys, tmp_path, no_work):

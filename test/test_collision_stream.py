@@ -4,7 +4,6 @@ against the clean batch check of the same deployment."""
 
 import math
 import resource
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -28,9 +27,8 @@ def scene():
     return load_scene(resolve_scene("paper_4x4"))
 
 
-def _run(scene, rate_hz, t_end=0.5, **overrides):
-    s, model = configure(scene.replace(closure=replace(scene.closure, **overrides))
-                         if overrides else scene, DynamicsParameters(t_end=t_end, rate_hz=rate_hz))
+def _run(scene, rate_hz, t_end=0.5, closure=""):
+    s, model = configure(scene, DynamicsParameters(t_end=t_end, rate_hz=rate_hz, closure=closure))
     return s, model, simulate(model, s.simulation)
 
 
@@ -168,7 +166,7 @@ def test_noise_setting_is_checked():
 def exact(scene):
     """The exact closure, so that the loop closes to rounding and the solved
     angles can be compared with the simulated ones."""
-    return _run(scene, 500.0, t_end=0.45, method="exact")
+    return _run(scene, 500.0, t_end=0.45, closure="exact")
 
 
 def test_loop_solver_recovers_every_loop_hinge(exact):

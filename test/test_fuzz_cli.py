@@ -1,13 +1,17 @@
 """Fuzz test of the command line's error contract (issue 19), with hypothesis.
 
 Random scene mutations, random ``--set`` values, random byte corruptions of
-scene, result and trajectory files, run through :func:`panel_deploy.cli.main`
-in-process. Each run must end with exit 0 or 1 and a finite answer, or exit 2
+scene, result and trajectory files, random output file names, run through
+:func:`panel_deploy.cli.main` in-process. Each run must end with exit 0 or 1 and a finite answer, or exit 2
 with exactly one line on stderr; never a traceback (any other exception fails).
 Issue 26 adds hostile files: YAML aliases (up to billion laughs) in every
 place YAML is read, ``.npy`` headers and MCAP chunks declaring sizes they do
 not hold (answered within seconds), and outputs naming an input file by
 another path (refused, the input unchanged).
+
+SIGINT or SIGTERM at a random moment of a recorded simulation (a child
+process) must end it within :data:`PROMPT_S` with exit 130 and the one line
+``panel-deploy: interrupted``, or find it already done (0 or 1).
 
 The example budget is fixed and the examples derandomised, so CI runs the same
 cases every time in well under a minute; ``bench/fuzz_cli.py`` runs the same
@@ -20,6 +24,9 @@ import contextlib
 import io
 import json
 import os
+import signal
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -340,6 +347,75 @@ alias_keys = st.sampled_from(["array.rows", "array.length", "hinges.overrides", 
 dimensions = st.sampled_from([0, 1, 3, 9, 50_000, 50_001, 10**6, 10**12, 2**62]) | st.integers(0, 10**13)
 declared_shapes = st.lists(dimensions, max_size=3).map(tuple)
 chunk_sizes = st.sampled_from([0, 1, 1000, 2**25, 2**25 + 1, 2**30, 2**64 - 1]) | st.integers(0, 2**64 - 1)
+#: Commands with an output file, and the flag that names it.
+OUTPUT_FLAGS = {"--out": ["simulate", str(PAPER), "--json", *FAST],
+                "--record": ["simulate", str(PAPER), "--json", *FAST],
+                "--mjcf": ["export", str(PAPER)],
+                "--plot": ["fold", "--rows", "2", "--cols", "2", "--json"]}
+output_names = st.one_of(
+    st.text(max_size=300),
+    st.tuples(st.integers(240, 300), st.sampled_from(["", ".npz", ".png", ".xyz"]))
+    .map(lambda n: "n" * n[0] + n[1]),
+    st.sampled_from([".", "..", "/", "\n", "a\nb.png", "x.PNG", "x.", ".png", "d/x.npz",
+                     "\x1b[2J.xml", "x.rrd"]))
+
+
+def case_output_name(flag, name):
+    """An output flag given ``name`` in a fresh folder (names, not folders, are fuzzed)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        run_cli("output", [*OUTPUT_FLAGS[flag], flag, f"{tmp}/{name}"])
+
+
+#: The run of issue 26's report: a deployment recorded as it is computed
+#: (numba loads its cached kernels during the first second).
+SIGNALLED = ["simulate", str(PAPER), "--record"]
+#: Longest wait for a signalled run to end once signalled, s (a warm run
+#: takes 2 s in all).
+PROMPT_S = 20.0
+signals = st.sampled_from([signal.SIGTERM, signal.SIGINT])
+signal_delays = st.floats(0.05, 1.2)
+
+
+def _handles_signals(pid) -> bool:
+    """Whether process ``pid`` has left Python's start-up for the command, whose
+    handler of SIGTERM it then shows in /proc (Linux), or has ended."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return True
+    caught = int(status.split("SigCgt:", 1)[1].split()[0], 16)
+    return bool(caught >> (signal.SIGTERM - 1) & 1)
+
+
+def case_signal(signum, delay):
+    """``SIGNALLED`` in a child process, sent ``signum`` ``delay`` s after its start,
+    or once past Python's own start-up (up to 0.15 s on a busy machine), which
+    meets a signal as Python does (SIGTERM kills, SIGINT prints a traceback)."""
+    name = signal.Signals(signum).name
+    with tempfile.TemporaryDirectory() as tmp:
+        argv = [*SIGNALLED, str(Path(tmp) / "x.mcap")]
+        start = time.perf_counter()
+        proc = subprocess.Popen([sys.executable, "-m", "panel_deploy.cli", *argv], cwd=tmp,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        while not _handles_signals(proc.pid):
+            time.sleep(0.002)
+        time.sleep(max(0.0, delay - (time.perf_counter() - start)))
+        with contextlib.suppress(ProcessLookupError):
+            proc.send_signal(signum)
+        sent = time.perf_counter()
+        try:
+            _, err = proc.communicate(timeout=PROMPT_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            raise Broken(f"signal: {name} at {sent - start:.3f} s: still running {PROMPT_S:g} s "
+                         "later") from None
+    code, lines = proc.returncode, err.strip().splitlines()
+    LOG.append(("signal", code, time.perf_counter() - sent, lines[0] if lines else "",
+                [name, f"{sent - start:.3f}", *argv]))
+    if "Traceback" in err or code not in (0, 1, 130) or (code == 130 and lines != [
+            "panel-deploy: interrupted"]):
+        raise Broken(f"signal: {name} at {sent - start:.3f} s: exit {code}, stderr {err[-500:]!r}")
 
 
 # --- fixtures: one valid result file and one valid trajectory ---
@@ -356,6 +432,17 @@ def make_result_text() -> str:
     names = [h.name for h in build_model(load_scene(PAPER)).hinges]
     return ("format: panel_deploy.stiffness/1\nscene: paper_4x4\nhinges:\n"
             + "".join(f"  {n}: {{k: 0.05, c: 0.00215}}\n" for n in names))
+
+
+@pytest.fixture(scope="module")
+def signalled_kernels(tmp_path_factory):
+    """The kernels of :data:`SIGNALLED` compiled, so that a signal meets their loading."""
+    warm_kernels(tmp_path_factory.mktemp("signals") / "x.mcap")
+
+
+def warm_kernels(record) -> None:
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main([*SIGNALLED, str(record)]) in (0, 1)
 
 
 @pytest.fixture(scope="module")
@@ -432,6 +519,18 @@ def test_fuzz_chunk_sizes(declared, zeros):
 @given(command=st.sampled_from(sorted(SAME_PATH)), form=st.sampled_from(PATH_FORMS))
 def test_fuzz_same_path_outputs(command, form):
     case_same_path(command, form)
+
+
+@CI
+@given(st.sampled_from(sorted(OUTPUT_FLAGS)), output_names)
+def test_fuzz_output_names(flag, name):
+    case_output_name(flag, name)
+
+
+@settings(CI, max_examples=20)
+@given(signum=signals, delay=signal_delays)
+def test_fuzz_signals_at_random_times(signalled_kernels, signum, delay):
+    case_signal(signum, delay)
 
 
 def test_the_contract_check_can_fail(monkeypatch):

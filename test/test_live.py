@@ -31,6 +31,32 @@ def test_configure_sets_samples_from_the_rate(short):
     assert scene.simulation.t_end == 0.5 and scene.simulation.samples == 101
 
 
+@pytest.mark.parametrize("params, message", [
+    # issue 26: 800,001 samples, +467 MB, past the scene schema's ten minutes
+    ({"t_end": 4000.0}, r"^t_end: expected a number <= 600, got 4000 \(limit: "),
+    ({"t_end": 300.0}, r"^rate_hz: 200 Hz over 300 s gives 60001 samples: expected an integer "
+                       r"<= 50000, got 60001 \(limit: memory"),
+    ({"t_end": 0.005}, r"^rate_hz: 200 Hz over 0.005 s gives 2 samples: expected an integer >= 3"),
+    ({"rtol": 1e-13}, r"^rtol: expected a number >= 1e-12, got 1e-15 .*\(scene key "
+                     r"simulation\.atol\)$"),
+])
+def test_configure_keeps_the_scene_schemas_limits(scene, params, message):
+    with pytest.raises(SceneError, match=message):
+        configure(scene, DynamicsParameters(**params))
+
+
+def test_configure_checks_the_step_budget_with_the_scenes_max_step():
+    scene = load_scene(resolve_scene("paper_4x4"), ["simulation.max_step=1e-4"])
+    with pytest.raises(SceneError, match=r"^t_end: t_end / max_step = 3e\+06 steps is above the "
+                                         r"step budget .*\(scene key simulation\.max_step\)$"):
+        configure(scene, DynamicsParameters(t_end=300.0, rate_hz=1.0))
+
+
+def test_configured_scene_carries_what_it_runs(short):
+    scene, _ = short  # what /panel_deploy/model and recordings write of it
+    assert scene.data["simulation"]["t_end"] == 0.5 and scene.data["simulation"]["samples"] == 101
+
+
 def test_deployment_streams_the_batch_trajectory(short):
     scene, model = short
     deployment = Deployment(model, scene.simulation, block=7)
@@ -103,7 +129,7 @@ def test_apply_stiffness_per_group_and_per_hinge(scene):
     ("stiffness", (-0.1,), "stiffness"), ("stiffness", (float("nan"),), "stiffness"),
     ("rate_hz", 0.0, "rate_hz"), ("real_time_factor", -1.0, "real_time_factor"),
     ("method", "Euler", "method"), ("closure", "glue", "closure"), ("rtol", 2.0, "rtol"),
-    ("t_end", float("inf"), "t_end"),
+    ("t_end", float("inf"), "t_end"), ("t_end", 4000.0, "t_end"),
 ])
 def test_dynamics_parameters_name_the_bad_field(field, value, match):
     with pytest.raises(SceneError, match=f"^{match}:"):

@@ -69,7 +69,18 @@ def test_defaults_and_density():
     ("closure.method", "lagrange", "closure.method: expected one of penalty, exact"),
     ("fold.ground", [0, 1], "fold.ground: expected a cell"),
     ("fold.circuit", "zigzag", "fold.circuit: expected a circuit index or a list of cells"),
-    ("fold.merge", [[[1, 2]]], "fold.merge: expected auto, none or a list of cell pairs"),
+    ("fold.merge", [[[1, 2]]], "fold.merge[0]: expected a pair of cells"),  # the item named
+    ("fold.merge", 3, "fold.merge: expected auto, none or a list of cell pairs"),
+    # issue 26: accepted silently before (the same hinge merged twice)
+    ("fold.merge", [[[1, 1], [1, 2]], [[2, 1], [2, 2]], [[1, 2], [1, 1]]],
+     "fold.merge[2]: pair [[1, 1], [1, 2]] is given twice (first as fold.merge[0])"),
+    ("closure.cut_hinge", [[[1, 1], [1, 2]], [[1, 1], [1, 2]]],
+     "closure.cut_hinge[1]: pair [[1, 1], [1, 2]] is given twice"),
+    # issue 26: ran 40 s to a step-budget failure reporting an approach speed of 8388 m/s
+    ("array.mass", 1e-9, "array.mass: 1e-09 kg in a 0.1 x 0.1 x 0.005 m panel is 2e-05 kg/m^3; "
+                         "expected >= 0.1 (limit: lighter than any solid"),
+    ("collision.tolerance", 0.05, "collision.tolerance: expected a number <= 0.02, got 0.05 "
+                                  "(limit: the collision check's broad phase"),
     ("gravity", [0, -9.81], "gravity: expected a list of 3 numbers"),
     ("optimisation.bounds", [0.2, 0.001], "optimisation.bounds: lower bound 0.2 is above"),
     ("optimisation.k0", 0.5, "optimisation.k0: 0.5 is outside bounds"),
@@ -89,6 +100,18 @@ def test_bad_values_name_the_key(path, value, expected):
     with pytest.raises(SceneError) as e:
         scene_from_dict(data)
     assert str(e.value).startswith(expected), str(e.value)
+
+
+def test_the_least_density_holds_for_density_and_mass_alike():
+    d = with_("array.density", 0.05)
+    del d["array"]["mass"]
+    with pytest.raises(SceneError, match=r"^array.density: expected a number >= 0.1, got 0.05 "
+                                         r"\(limit: lighter than any solid"):
+        scene_from_dict(d)
+    # an aerogel panel of the paper's size, and the lightest mass accepted there
+    assert scene_from_dict(with_("array.mass", 1e-5)).array.unit_mass == 1e-5
+    d["array"]["density"] = 0.16
+    assert scene_from_dict(d).array.unit_mass == pytest.approx(0.16 * 0.1 * 0.1 * 0.005)
 
 
 def test_missing_required_keys():

@@ -40,3 +40,16 @@ def test_zero_energy_run_reports_no_balance_error(capsys):
                  "--set", "hinges.stiffness=0", "--set", "gravity=[0, 0, 0]"])
     out = json.loads(capsys.readouterr().out)
     assert code == 0 and out["energy_balance_error"] is None  # was 1.6e17
+
+
+def test_a_failed_runs_collision_is_not_passed_off_as_a_result():
+    # issue 26: a run stopped by its step budget reported v = 8388 m/s as it would a result
+    s = summary(None, 0.0012)
+    s.update(success=False, message="step budget exhausted at t = 0.0013 s")
+    text = deployment_text(s)
+    assert text.startswith("FAILED: step budget exhausted")
+    assert text.splitlines()[-1].endswith("d = 0.05 m (up to the failure: not a result)")
+    s["collision"]["first_collision"] = None
+    assert deployment_text(s).splitlines()[-1] == ("no collision; smallest distance d = 0.05 m "
+                                                   "(up to the failure: not a result)")
+    assert "not a result" not in deployment_text(summary(None, 0.0012))

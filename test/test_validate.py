@@ -2,6 +2,7 @@
 
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -66,6 +67,18 @@ def test_output_path_checks(tmp_path):
     (tmp_path / "file").write_text("x")
     with pytest.raises(SceneError, match="is not a folder"):
         check_output_path(tmp_path / "file" / "a.npz", "--out")
+
+
+def test_output_path_is_checked_by_creating_the_atomic_writes_temporary_file(tmp_path):
+    # issue 26: each of these passed the check and failed after the work
+    name_max = os.pathconf(tmp_path, "PC_NAME_MAX")
+    for path, message in ((tmp_path / ("a" * (name_max + 45)), "File name too long"),
+                          (tmp_path / ("a" * (name_max - 5)), "File name too long"),
+                          (Path("/proc/x.rrd"), "folder /proc does not take new files")):
+        with pytest.raises(SceneError, match=f"^--save: cannot write .*{message}"):
+            check_output_path(path, "--save")
+    assert check_output_path(tmp_path / ("a" * (name_max - 20)), "--save")
+    assert not list(tmp_path.iterdir())  # the probe leaves nothing behind
 
 
 def test_atomic_write_leaves_no_part_file_and_rescues_the_content(tmp_path, monkeypatch):

@@ -45,11 +45,22 @@ def _stiffness_list(text):
     return values
 
 
+#: Control characters as Python writes them in a string's repr (``\n``, ``\x1b``):
+#: a key or path holding one stays on the error's one line, and a terminal
+#: escape in it is shown, not obeyed.
+_ESCAPES = {c: repr(chr(c))[1:-1] for c in (*range(32), 127)}
+
+
+def error_line(message, prog: str = "panel-deploy") -> str:
+    """The one line ``<prog>: error: <message>`` (no newline at its end)."""
+    return f"{prog}: error: {str(message).translate(_ESCAPES)}"
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with its errors as the one line every other error is (no usage block)."""
 
     def error(self, message):
-        self.exit(2, f"{self.prog}: error: {message}\n")
+        self.exit(2, error_line(message, self.prog) + "\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -161,34 +172,100 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _interrupt(signum, frame):
-    # numba hands arrays back from compiled code through a Python callback
-    # (numba.core.serialize) whose errors it does not check: raised there, the
-    # KeyboardInterrupt would surface as a SystemError. Deliver it again a
-    # moment later instead, when the interpreter is back in our code.
-    if frame is not None and frame.f_globals.get("__name__", "").startswith("numba"):
-        threading.Timer(0.01, os.kill, (os.getpid(), signum)).start()
-        return
-    raise KeyboardInterrupt
+#: Code in which an interrupt is deferred instead of raised: numba and llvmlite
+#: load the kernels through C callbacks that do not check for errors (raised
+#: there, a KeyboardInterrupt became a SystemError, a segfault, or a C
+#: extension's "ImportError: initialization failed"), and importlib, whose
+#: imports run those extensions' initialisation.
+DEFERRED_IN = ("numba", "llvmlite", "importlib")
+#: How often a deferred interrupt looks again whether it may be raised, s.
+RETRY_S = 0.01
+
+
+def deferring(frame) -> bool:
+    """Whether ``frame`` or one of its callers is code of :data:`DEFERRED_IN`,
+    or a string run by ``exec``: CPython 3.11 marks a KeyboardInterrupt raised
+    in one (rosbags compiles its serialisers so) as unhandled even when caught,
+    and the process then ends killed by SIGINT instead of with its exit code."""
+    while frame is not None:
+        code = frame.f_code
+        if frame.f_globals.get("__name__", "").partition(".")[0] in DEFERRED_IN or (
+                code.co_filename == "<string>" and code.co_name == "<module>"
+                and frame.f_back is not None):  # not ``python -c``'s own program
+            return True
+        frame = frame.f_back
+    return False
+
+
+class Interrupts:
+    """SIGINT and SIGTERM as a KeyboardInterrupt, raised only where that is safe.
+
+    In code of :data:`DEFERRED_IN` the signal is noted and looked at again
+    every :data:`RETRY_S` (SIGALRM, so no thread is started inside a
+    signal handler) until the interpreter is back in other code. Once the
+    command is over (:attr:`over`), a signal only waits for the exit under way.
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGALRM)
+
+    def __init__(self):
+        self.received = None  # the first SIGINT or SIGTERM
+        self.raised = False
+        self.over = False
+        self.previous = {}
+
+    def __call__(self, signum, frame):
+        if signum != signal.SIGALRM and self.received is None:
+            self.received = signum
+        if self.received is None or self.over:
+            return
+        if deferring(frame):
+            signal.setitimer(signal.ITIMER_REAL, RETRY_S)
+            return
+        self.raised = True
+        raise KeyboardInterrupt
+
+    def install(self):
+        self.previous = {sig: signal.signal(sig, self) for sig in self.SIGNALS}
+
+    def restore(self):
+        if not self.previous:
+            return  # never installed (a thread other than the main one)
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        for sig, handler in self.previous.items():
+            signal.signal(sig, handler)
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    """The ``panel-deploy`` command; ``argv`` None: this process's own command
+    line, the signal handlers then staying until the process exits (a signal
+    during the interpreter's exit would otherwise kill it with the exit code
+    already decided)."""
     # A service manager's SIGTERM ends a long job like Ctrl-C does: the
     # optimiser then still writes the best K it has.
+    interrupts = Interrupts()
     if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, _interrupt)
+        interrupts.install()
     try:
+        args = build_parser().parse_args(argv)
         from .checks import check_args
         check_args(args)  # every flag and output path, before any work
-        return args.func(args) or 0
+        code = args.func(args) or 0
+        if interrupts.received and not interrupts.raised:
+            # deferred to the end of the command (kernels loading up to its last moment)
+            raise KeyboardInterrupt
+        return code
     except PanelDeployError as e:
-        print(f"panel-deploy: error: {e}", file=sys.stderr)
+        print(error_line(e), file=sys.stderr)
         return 2
     except BrokenPipeError:  # output piped into head & co.: not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except KeyboardInterrupt:
+        interrupts.over = True
         print("panel-deploy: interrupted", file=sys.stderr)
         return 130
-
+    finally:
+        interrupts.over = True
+        if argv is not None:
+            interrupts.restore()

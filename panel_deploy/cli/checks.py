@@ -49,6 +49,9 @@ INPUTS = {
     "bench": (("scene", "scene"),),
 }
 
+#: Output flags that write a picture, in the format of the file name's suffix.
+PICTURES = ("--png", "--plot")
+
 
 def check_args(args) -> None:
     """Check the parsed ``args`` of one command; :class:`SceneError` naming the flag."""
@@ -71,6 +74,8 @@ def check_args(args) -> None:
         for other, other_flag in earlier:
             if _same_file(path, other):
                 raise SceneError(flag, f"{path} is also {other_flag}: give two files")
+        if flag in PICTURES:
+            _picture_format(path, flag)
         earlier.append((path, flag))
     check = _CHECKS.get(command)
     if check is not None:
@@ -142,4 +147,28 @@ def _bench(args):
     _positive_int(args, "repeats", "--repeats", low=1)
 
 
-_CHECKS = {"fold": _fold, "optimise": _optimise, "bench": _bench}
+def _picture_format(path, flag):
+    suffix = Path(str(path)).suffix.lstrip(".").lower()
+    if not suffix:
+        return  # written as PNG
+    from matplotlib.backend_bases import FigureCanvasBase
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if suffix not in formats:
+        raise SceneError(flag, f"cannot write a picture as .{suffix} (the suffix gives the format: "
+                               f"{', '.join(sorted(formats))})")
+
+
+def _replay(args):
+    finite_number(args.port, "--port", low=1, high=65535, integer=True)
+    if args.serve:
+        import socket
+        with socket.socket() as probe:
+            try:
+                probe.bind(("127.0.0.1", args.port))
+            except OSError as e:
+                raise SceneError("--port", f"cannot serve on 127.0.0.1:{args.port} "
+                                           f"({e.strerror or e}: another program has it); "
+                                           "choose a free one with --port") from None
+
+
+_CHECKS = {"fold": _fold, "optimise": _optimise, "bench": _bench, "replay": _replay}

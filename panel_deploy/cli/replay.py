@@ -69,6 +69,9 @@ def replay_command(args) -> int:
     try:
         stream.flush(timeout_sec=30.0)
     except RuntimeError as e:  # a viewer that did not start (no display) or went away
+        if args.serve:  # the port taken since it was checked
+            raise SceneError("--serve", f"cannot serve on 127.0.0.1:{args.port} ({e}); choose "
+                                        "another port with --port") from None
         raise SceneError("--spawn", f"the rerun viewer is not reachable ({e}); write a file "
                                     f"with --save OUT.rrd or serve with --serve") from None
     if args.save:

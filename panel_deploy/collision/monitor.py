@@ -100,6 +100,7 @@ from ..dynamics.pack import pack
 from ..dynamics.simulate import body_states
 from ..errors import SceneError, TrajectoryError, shown
 from ..model import Model
+from ..scene import COLLISION_MARGIN
 from .geometry import CERTIFY_TOL, BoxSet, PairGeometry, box_signed_distance, pair_bound
 from .motion import HermiteSegment, PairSpeedBound
 from .refine import MAX_DEPTH, poses, refine_interval, stack
@@ -144,7 +145,7 @@ class CollisionSettings:
     refine: bool = True
     resolution: float = 1.0e-6
     time_resolution: float = 1.0e-6
-    margin: float = 0.02
+    margin: float = COLLISION_MARGIN
     noise: float = 0.0
     speed_interval: float = 0.0
 

@@ -159,8 +159,8 @@ def test_rosbags_decodes_every_message_and_it_is_what_was_computed(recorded):
     (t_end, diagnostics), = got["/diagnostics"]
     assert t_end == stamps[-1]
     outcome = {st.name: st for st in diagnostics.status}
-    assert outcome["panel_deploy/dynamics"].level == m.OK
-    assert outcome["panel_deploy/collision_monitor"].level == m.ERROR
+    assert outcome["/dynamics"].level == m.OK
+    assert outcome["/collision_monitor"].level == m.ERROR
 
 
 def test_rclpy_deserializes_every_message_to_the_same_content(recorded):

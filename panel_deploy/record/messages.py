@@ -46,9 +46,10 @@ TOPICS = {
 }
 
 OK, WARN, ERROR = 0, 1, 2
-#: Status names of the node suite's ``dynamics`` and ``collision_monitor``.
-DYNAMICS_STATUS = "panel_deploy/dynamics"
-MONITOR_STATUS = "panel_deploy/collision_monitor"
+#: Status names of the node suite's ``dynamics`` and ``collision_monitor``, as the
+#: nodes name theirs (their full names) in the root namespace.
+DYNAMICS_STATUS = "/dynamics"
+MONITOR_STATUS = "/collision_monitor"
 EVENT_STATUS = MONITOR_STATUS + "/event"
 PANEL_COLOUR = (0.25, 0.45, 0.85, 1.0)
 

@@ -31,7 +31,8 @@ from hypothesis import strategies as st  # noqa: E402
 import test_fuzz_cli as fz  # noqa: E402
 
 PROPERTIES = ["scene mutations", "--set values", "scene bytes", "result bytes",
-              "trajectory bytes", "trajectory arrays", "output names", "signals"]
+              "trajectory bytes", "trajectory arrays", "aliases", "declared sizes", "chunk sizes",
+              "same path", "output names", "signals"]
 
 
 def main(argv=None) -> int:

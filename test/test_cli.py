@@ -315,6 +315,8 @@ def no_work(monkeypatch):
                                                                       "picture as .xyz"),
     (["replay", "r.mcap", "--serve", "--port", "70000"], "--port: expected an integer <= 65535"),
     (["replay", "r.mcap", "--port", "0"], "--port: expected an integer >= 1"),
+    (["replay", "r.mcap", "--save", "{tmp}/scene.yaml"], "--save: expected a rerun file name "
+                                                        "ending in .rrd, got "),
 ])
 def test_bad_flags_and_output_paths_fail_before_any_work(capsys, tmp_path, no_work, argv, expected):
     fill = {"missing": str(tmp_path / "missing"), "tmp": str(tmp_path)}

@@ -16,8 +16,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ..errors import SceneError
-from ..validate import check_output_path, finite_number
+from ..errors import SceneError, shown
+from ..validate import check_output_path, finite_number, in_place
 
 #: Largest array ``fold --rows R --cols C`` counts: the frontier count's time
 #: and memory grow about 3-4 fold per cell of the shorter side (12 x 12:
@@ -160,6 +160,11 @@ def _picture_format(path, flag):
 
 def _replay(args):
     finite_number(args.port, "--port", low=1, high=65535, integer=True)
+    save = getattr(args, "save", None)
+    if save is not None and Path(save).suffix != ".rrd" and not in_place(save):
+        # A rerun file under another name would replace whatever had it (a scene, a bag);
+        # a device or pipe (/dev/stdout) is written in place and replaces nothing.
+        raise SceneError("--save", f"expected a rerun file name ending in .rrd, got {shown(save)}")
     if args.serve:
         import socket
         with socket.socket() as probe:

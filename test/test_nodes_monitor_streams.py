@@ -212,5 +212,6 @@ def test_receipt_stamps_take_unfilled_stamps(graph, deployment):
         last = verdict_after(diagnostics, 200)
     finally:
         set_parameter(client, "stamps", "header")
-    assert values(last)["refused"] == "0" and last.level == messages.OK
+    # (arrival times on a loaded machine may show gaps: a WARN, never a refusal)
+    assert values(last)["refused"] == "0" and last.level in (messages.OK, messages.WARN)
     assert 0.15 < float(values(last)["t"]) < 5.0  # wall seconds since the first arrival

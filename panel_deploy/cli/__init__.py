@@ -16,7 +16,7 @@ import signal
 import sys
 import threading
 
-from ..errors import PanelDeployError
+from ..errors import PanelDeployError, shown
 from .args import add_set, alias
 
 
@@ -39,9 +39,9 @@ def _stiffness_list(text):
     try:
         values = [float(x) for x in text.split(",")]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {shown(text)}") from None
     if not values or any(not 0 < v < float("inf") for v in values):
-        raise argparse.ArgumentTypeError(f"expected finite stiffnesses > 0 N m/rad, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected finite stiffnesses > 0 N m/rad, got {shown(text)}")
     return values
 
 

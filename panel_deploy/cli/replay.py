@@ -7,7 +7,7 @@ import sys
 import threading
 from pathlib import Path
 
-from ..errors import SceneError
+from ..errors import SceneError, shown
 from ..record.analysis import read_deployment
 from ..record.replay import blueprint, log_deployment
 from ..record.strip import render_strip
@@ -18,7 +18,7 @@ def _times(text: str) -> list:
     try:
         times = [float(x) for x in text.split(",") if x.strip()]
     except ValueError:
-        raise SceneError("--at", f"expected instants in s separated by commas, got {text!r}") from None
+        raise SceneError("--at", f"expected instants in s separated by commas, got {shown(text)}") from None
     if not times:
         raise SceneError("--at", "expected at least one instant")
     return times

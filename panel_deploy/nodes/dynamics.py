@@ -29,7 +29,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
-from ..errors import PanelDeployError
+from ..errors import PanelDeployError, shown
 from ..live import Deployment, DynamicsParameters, Pacer, configure
 from ..summary import deployment_summary
 from . import messages, runtime
@@ -90,7 +90,7 @@ class DynamicsNode(runtime.WorkerNode):
     def _check(self, changes):
         prefix = changes.get(FRAME_PREFIX, "")
         if prefix.startswith("/") or any(c.isspace() for c in prefix):
-            raise PanelDeployError(f"{FRAME_PREFIX}: {prefix!r}: tf2 frames start with no '/' "
+            raise PanelDeployError(f"{FRAME_PREFIX}: {shown(prefix)}: tf2 frames start with no '/' "
                                    "and hold no spaces")
         params = self.parameters(changes)
         if self.scene is not None:  # counts and values the scene must accept

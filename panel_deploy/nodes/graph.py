@@ -25,7 +25,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
-from ..errors import SceneError
+from ..errors import SceneError, shown
 from ..live import scene_yaml
 from ..record.deployment import outcome_record
 from ..summary import deployment_text
@@ -248,7 +248,7 @@ def run_graph(scene, *, optimise: bool = False, real_time_factor: float = 1.0,
         validate_namespace(namespace or "/")
     except Exception as e:  # rclpy's message is three lines with a caret
         reason = str(e).splitlines()[0].removeprefix("Invalid namespace: ").rstrip(":")
-        raise SceneError("--namespace", f"{reason}, got {namespace!r}") from None
+        raise SceneError("--namespace", f"{reason}, got {shown(namespace)}") from None
     with tempfile.TemporaryDirectory(prefix="panel_deploy_run_") as folder:
         # The array_model node reads a scene file: this one has the overrides applied.
         path = Path(folder) / f"{scene.name or 'scene'}.yaml"

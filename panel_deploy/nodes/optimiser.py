@@ -20,7 +20,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
 from ..build import build_model
-from ..errors import PanelDeployError, SceneError
+from ..errors import PanelDeployError, SceneError, shown
 from ..live import optimisation_scene
 from ..optimise import optimise
 from ..optimise.io import dump_result, result_to_dict
@@ -68,7 +68,7 @@ class OptimiserNode(runtime.WorkerNode):
             except RuntimeError:  # rclpy's RCLError: a character or token a name cannot have
                 pass
         raise SceneError("target_node", f"expected a node name such as dynamics or "
-                                        f"/array1/dynamics, got {target!r}")
+                                        f"/array1/dynamics, got {shown(target)}")
 
     def _search_scene(self, changes=None):
         p = {**runtime.values(self, PARAMETERS), **(changes or {})}

@@ -24,7 +24,7 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from ..errors import PanelDeployError, SceneError
+from ..errors import PanelDeployError, SceneError, shown
 from ..live import scene_from_yaml
 from . import messages
 
@@ -63,7 +63,7 @@ def declare(node, parameters: dict, check=None) -> None:
         expected = node.describe_parameter(p.name).type
         if p.type_.value != expected:
             raise SceneError(p.name, f"expected {_TYPE_NAMES.get(expected, 'another type')}, "
-                                     f"got {p.value!r}")
+                                     f"got {shown(p.value)}")
     if given:
         result = node.set_parameters_atomically(given)
         if not result.successful:

@@ -2,10 +2,11 @@
 
     ros2 launch panel_deploy panel_deploy.launch.py scene:=paper_4x4 real_time_factor:=1.0
 
-Arguments: scene, rate_hz, real_time_factor, use_sim_time, namespace. Then
+Arguments: scene, rate_hz, real_time_factor, use_sim_time, namespace, frame_prefix. Then
 ``ros2 service call /dynamics/deploy std_srvs/srv/Trigger`` deploys the array;
-with ``namespace:=array1`` every topic and service but /diagnostics and
-/clock is under /array1, so that several arrays run side by side.
+with ``namespace:=array1`` every topic and service but /diagnostics, /clock,
+/tf and /tf_static is under /array1, so that several arrays run side by side
+(``frame_prefix:=array1/`` keeps their frames apart on the global /tf).
 """
 
 import os
@@ -33,13 +34,17 @@ def generate_launch_description():
                               description="nodes take their time from /clock"),
         DeclareLaunchArgument("namespace", default_value="",
                               description="namespace of the four nodes (one per array)"),
+        DeclareLaunchArgument("frame_prefix", default_value="",
+                              description="prefix of the /tf frames (e.g. array1/ with "
+                                          "namespace:=array1: /tf is global)"),
     ]
     sim_time = ParameterValue(LaunchConfiguration("use_sim_time"), value_type=bool)
     overrides = {
         "array_model": {"scene": LaunchConfiguration("scene")},
         "dynamics": {"rate_hz": ParameterValue(LaunchConfiguration("rate_hz"), value_type=float),
                      "real_time_factor": ParameterValue(LaunchConfiguration("real_time_factor"),
-                                                        value_type=float)},
+                                                        value_type=float),
+                     "frame_prefix": LaunchConfiguration("frame_prefix")},
     }
     nodes = [Node(package="panel_deploy", executable=name, name=name, output="screen",
                   namespace=LaunchConfiguration("namespace"),

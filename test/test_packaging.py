@@ -40,7 +40,8 @@ def test_launch_file_compiles_and_names_installed_executables():
     assert tuple(ast.literal_eval(nodes)) == NODES
     arguments = {c.args[0].value for c in ast.walk(tree) if isinstance(c, ast.Call)
                  and getattr(c.func, "id", "") == "DeclareLaunchArgument"}
-    assert arguments == {"scene", "rate_hz", "real_time_factor", "use_sim_time", "namespace"}
+    assert arguments == {"scene", "rate_hz", "real_time_factor", "use_sim_time", "namespace",
+                         "frame_prefix"}
 
 
 def test_params_yaml_keys_are_declared_parameters():

@@ -86,7 +86,7 @@ class LoopSolver:
         if not self.missing:
             return
         theta = self._closed_state()
-        J = self._jacobian(theta, self._cut_residual_at(theta))
+        J, _ = self._jacobian(theta, self._cut_residual_at(theta))
         rank = np.linalg.matrix_rank(J, tol=RANK_TOL * np.abs(J).max())
         if rank == len(self.missing):
             return
@@ -127,14 +127,15 @@ class LoopSolver:
         angles = (r[self._cut_rows, 6] - cut_target) * self._scale
         return np.concatenate([gaps, angles])
 
-    def _jacobian(self, theta, cut_target):
+    def _jacobian(self, theta, cut_target) -> tuple:
+        """``(J, r)``: d r / d theta of the missing angles, and r, at ``theta``."""
         r0 = self._residual(theta, cut_target)
         J = np.empty((r0.size, len(self.missing)))
         for i, x in enumerate(self.missing):
             th = theta.copy()
             th[x] += FD_STEP
             J[:, i] = (self._residual(th, cut_target) - r0) / FD_STEP
-        return J
+        return J, r0
 
     def solve(self, theta_known, cut_theta, omega_known=None, cut_omega=None) -> tuple:
         """Full tree angles (and rates) from the measured ones.
@@ -165,28 +166,27 @@ class LoopSolver:
         theta[self.missing] = x
         # The chord method: one Jacobian per sample, the previous solution's,
         # is enough for the small steps between samples.
-        J = self._J if self._J is not None else self._jacobian(theta, cut_target)
+        J = self._J if self._J is not None else self._jacobian(theta, cut_target)[0]
         for _ in range(MAX_STEPS):
             step = np.linalg.lstsq(J, -self._residual(theta, cut_target), rcond=None)[0]
             x += step
             theta[self.missing] = x
             if not np.abs(step).max() > STEP_TOL:
                 break
-        gap = float(np.abs(loop_residual(self._packed, theta)[:, :6]).max(initial=0.0))
+        # At the solution: the rates need it exact, and it is the next sample's chord.
+        J, r0 = self._jacobian(theta, cut_target)
+        gap = float(np.abs(r0[:6 * len(self.model.cut_hinges)]).max(initial=0.0))
         if not np.all(np.isfinite(x)) or gap > GAP_LIMIT:
             raise TrajectoryError(f"position: the carried angles leave the loop open by "
                                   f"{gap * 1e3:.3g} mm; cannot solve for "
                                   f"{self.tree_names[self.missing[0]]!r}")
-        # At the solution: the rates need it exact, and it is the next sample's chord.
-        J = self._J = self._jacobian(theta, cut_target)
-        self._guess, self.last_gap = x, gap
+        self._J, self._guess, self.last_gap = J, x, gap
         if omega_known is None or (self.cut_names and cut_omega is None):
             return theta, None
         omega = np.zeros(n)
         omega[self.known] = omega_known
         # J_x omega_x = -(d r / d theta_known) omega_known: one directional difference.
         cut_rate = np.asarray(cut_omega if cut_omega is not None else (), dtype=float)
-        r0 = self._residual(theta, cut_target)
         moved = self._residual(theta + FD_STEP * omega, cut_target + FD_STEP * cut_rate)
         omega[self.missing] = np.linalg.lstsq(J, -(moved - r0) / FD_STEP, rcond=None)[0]
         return theta, omega

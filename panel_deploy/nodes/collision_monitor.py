@@ -62,6 +62,7 @@ class CollisionMonitorNode(Node):
         self.create_subscription(JointState, "joint_states", self._on_joint_state, messages.STREAM)
         runtime.trigger_service(self, "~/reset", self._reset)
         self._throttle = Throttle()
+        self._receipt = self.get_parameter("stamps").value == "receipt"  # read per message
         self.create_timer(0.5, self._publish_verdict)
 
     def _collision(self, changes=None) -> CollisionSettings:
@@ -84,6 +85,7 @@ class CollisionMonitorNode(Node):
             raise SceneError(e.path.removeprefix("collision."), e.reason) from None
 
     def _apply(self, params):
+        self._receipt = self.get_parameter("stamps").value == "receipt"
         if self.stream is not None:  # from the next deployment on
             self.stream.collision = self._collision()
 
@@ -102,7 +104,7 @@ class CollisionMonitorNode(Node):
             return self._warn("no model", "joint state skipped: no model yet on panel_deploy/model")
         try:
             t, names, position, velocity = messages.read_joint_state(msg, stream.names)
-            if self.get_parameter("stamps").value == "receipt":
+            if self._receipt:
                 t = self.get_clock().now().nanoseconds * 1e-9
             theta, omega = stream.coordinates(names, position, velocity)
             deployments = stream.deployments

@@ -1,25 +1,33 @@
 """Saving and loading sampled trajectories (``simulate --out``, ``collide``).
 
-Format: one ``.npz`` file (numpy's zip of arrays), written to a temporary file
-and renamed into place so that an interrupted run never leaves a half file.
+Format: one ``.npz`` file (numpy's zip of ``.npy`` arrays, readable without this
+package), written to a temporary file and renamed into place so that an
+interrupted run never leaves a half file. docs/formats.md describes it for a
+reader without this package; :data:`UNITS` and :data:`COLUMNS` are the one
+statement of units and column names, stored in every file as JSON text.
 
 Arrays: every per-sample array of :class:`~panel_deploy.dynamics.result.SimulationResult`
 under its own name (``t``, ``theta``, ``omega``, ``rotation``, ``position``,
 ``linear_velocity``, ``angular_velocity``, ``constraint_gap``,
-``closure_sigma_min``, ``cut_theta``), energies as ``energy_<kind>``, and
-``scene_yaml`` (the scene mapping as YAML text), ``stiffness`` (k per hinge,
-N m/rad, as simulated), ``hinge_names``, ``body_names``, and the run's
-``success``, ``status``, ``message``, ``method``, ``scheme``, ``nfev``,
-``njev``, ``nlu``, ``nsteps``, ``nswitches``, ``gap_limit``, ``wall_time``;
-``format_version``.
+``closure_sigma_min``, ``cut_theta``), energies as ``energy_<kind>``, the
+per-hinge ``stiffness`` and ``damping`` as simulated, the name arrays that
+label their columns (``joint_names``, ``cut_hinge_names``, ``hinge_names``,
+``body_names``), ``scene_yaml`` (the scene as YAML text with the stiffnesses
+that ran), ``units`` and ``columns`` (JSON text), the run's ``success``,
+``status``, ``message``, ``method``, ``scheme``, ``nfev``, ``njev``, ``nlu``,
+``nsteps``, ``nswitches``, ``gap_limit``, ``wall_time``; ``format_version``.
+Files of version 2 (no name arrays, no ``damping``) still load: their columns
+are those of the stored scene's model.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import zipfile
 import zlib
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import yaml
@@ -28,60 +36,107 @@ from .dynamics.result import PER_SAMPLE, SimulationResult, Status
 from .errors import SceneError, TrajectoryError, shown
 from .validate import load_yaml, yaml_problem
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
+#: Versions :func:`load_trajectory` reads (2: the columns of ``theta``,
+#: ``omega`` and ``cut_theta`` unnamed, no ``damping``).
+READABLE_VERSIONS = (2, 3)
 _ARRAYS = PER_SAMPLE
 #: The run's scalars: name -> kind (i integer, f number, U text, b bool).
 _SCALARS = {"success": "b", "status": "i", "message": "U", "method": "U", "scheme": "U",
             "nfev": "i", "njev": "i", "nlu": "i", "nsteps": "i", "nswitches": "i",
             "gap_limit": "f", "wall_time": "f"}
 
+#: SI unit of every numeric array and scalar of the file ("1": dimensionless;
+#: ``energy_<kind>`` stands for every energy array).
+UNITS = {"t": "s", "theta": "rad", "omega": "rad/s", "rotation": "1", "position": "m",
+         "linear_velocity": "m/s", "angular_velocity": "rad/s", "constraint_gap": "m",
+         "closure_sigma_min": "1", "cut_theta": "rad", "energy_<kind>": "J",
+         "stiffness": "N m/rad", "damping": "N m s/rad", "gap_limit": "m", "wall_time": "s"}
+
+#: The name array that labels the columns of each array: axis 1 of a
+#: per-sample array (axis 0 is the sample), axis 0 of a per-hinge one.
+COLUMNS = {"theta": "joint_names", "omega": "joint_names", "cut_theta": "cut_hinge_names",
+           "rotation": "body_names", "position": "body_names", "linear_velocity": "body_names",
+           "angular_velocity": "body_names", "stiffness": "hinge_names",
+           "damping": "hinge_names"}
+
+
+def column_names(model) -> dict:
+    """The column names of a trajectory of ``model``: name array -> list of str.
+
+    ``joint_names`` are the tree coordinates (``model.joints``: ``theta[:, i]``
+    is the angle of hinge ``joint_names[i]``), ``cut_hinge_names`` the cut
+    hinges, ``hinge_names`` every hinge in the model's order and
+    ``body_names`` every body in the model's order.
+    """
+    return {"joint_names": [model.hinges[h].name for h in model.joints],
+            "cut_hinge_names": [model.hinges[h].name for h in model.cut_hinges],
+            "hinge_names": [h.name for h in model.hinges],
+            "body_names": [b.name for b in model.bodies]}
+
+
+class StoredTrajectory(NamedTuple):
+    """What :func:`load_trajectory` reads back."""
+
+    #: The run, columns as :func:`column_names` of ``model`` names them.
+    result: SimulationResult
+    #: Rebuilt from the stored scene.
+    scene: object
+    #: The stored scene's model with the stored k and c per hinge.
+    model: object
+    #: k per hinge as simulated, N m/rad.
+    stiffness: np.ndarray
+    #: c per hinge as simulated, N m s/rad (version 2: the scene's c/k times k).
+    damping: np.ndarray
+    #: The file's format_version.
+    version: int
+
 
 def save_trajectory(path, result: SimulationResult, scene, model, flag: str = "--out") -> Path:
     """Write ``result`` with what is needed to rebuild its model; returns the path.
 
-    Atomic; if the write fails, the trajectory is saved in a fallback file
-    and the :class:`~panel_deploy.errors.PanelDeployError` (naming ``flag``)
-    says where (:func:`~panel_deploy.validate.write_atomic`).
+    The stored scene carries ``model``'s k per hinge (as
+    :func:`~panel_deploy.live.scene_yaml` writes it) and ``damping`` its c,
+    so that the file says exactly what ran. Atomic; if the write fails, the
+    trajectory is saved in a fallback file and the
+    :class:`~panel_deploy.errors.PanelDeployError` (naming ``flag``) says
+    where (:func:`~panel_deploy.validate.write_atomic`).
     """
+    from .live import scene_yaml
+    from .validate import write_atomic
+
     path = Path(path)
     payload = {name: getattr(result, name) for name in _ARRAYS}
     payload.update({f"energy_{k}": v for k, v in result.energy.items()})
+    payload.update({name: np.array(names, dtype=str)
+                    for name, names in column_names(model).items()})
     payload.update(
-        scene_yaml=np.array(yaml.safe_dump(scene.data, sort_keys=False)),
-        stiffness=model.stiffness, hinge_names=np.array([h.name for h in model.hinges]),
-        body_names=np.array([b.name for b in model.bodies]),
+        scene_yaml=np.array(scene_yaml(scene, model)), stiffness=model.stiffness,
+        damping=np.array([h.c for h in model.hinges]),
+        units=np.array(json.dumps(UNITS)), columns=np.array(json.dumps(COLUMNS)),
         format_version=np.array(FORMAT_VERSION))
     payload.update({name: np.array(getattr(result, name)) for name in _SCALARS})
-    from .validate import write_atomic
     return write_atomic(path, lambda f: np.savez_compressed(f, **payload), flag, mode="wb")
 
 
-def load_trajectory(path):
-    """Read a trajectory file.
-
-    Returns
-    -------
-    result : SimulationResult
-    scene : Scene
-        Rebuilt from the stored scene mapping.
-    stiffness : (n_hinges,) ndarray
-        N m/rad, as simulated.
+def load_trajectory(path) -> StoredTrajectory:
+    """Read a trajectory file (format version 2 or 3).
 
     Raises
     ------
     TrajectoryError
-        If the file is missing, not a trajectory file, truncated, or its arrays
-        have inconsistent shapes.
+        If the file is missing, not a trajectory file, truncated, its arrays
+        have inconsistent shapes, or its column names are not those of the
+        stored scene's model.
     """
+    from .build import build_model
     from .scene import scene_from_dict
 
     path = Path(path)
     if not path.exists():
         raise TrajectoryError(f"{path}: trajectory file not found")
-    if not zipfile.is_zipfile(path):
-        raise TrajectoryError(f"{path}: not a trajectory file (expected an .npz archive)")
-    if path.is_dir():
-        raise TrajectoryError(f"{path}: is a folder, not a trajectory file")
+    if path.is_dir() or not zipfile.is_zipfile(path):
+        raise TrajectoryError(f"{path}: {_what_else(path)}")
     try:
         _check_declared_sizes(path)
         with np.load(path, allow_pickle=False) as z:
@@ -95,19 +150,31 @@ def load_trajectory(path):
     if "format_version" not in data:
         raise TrajectoryError(f"{path}: missing arrays format_version")
     version = _scalar(path, data, "format_version", "i")
-    if version != FORMAT_VERSION:
-        raise TrajectoryError(f"{path}: format_version {version}, expected {FORMAT_VERSION} "
-                              "(simulate it again with this version's simulate --out)")
-    missing = [k for k in (*_ARRAYS, *_SCALARS, "scene_yaml", "stiffness") if k not in data]
+    if version not in READABLE_VERSIONS:
+        raise TrajectoryError(f"{path}: format_version {version}, expected one of "
+                              f"{', '.join(map(str, READABLE_VERSIONS))} (simulate it again "
+                              "with this version's simulate --out)")
+    named = (*COLUMNS.values(), "damping") if version >= 3 else ()
+    missing = [k for k in dict.fromkeys((*_ARRAYS, *_SCALARS, "scene_yaml", "stiffness", *named))
+               if k not in data]
     if missing:
         raise TrajectoryError(f"{path}: missing arrays {', '.join(missing)}")
     _check_arrays(path, data)
     try:
         scene = scene_from_dict(load_yaml(_scalar(path, data, "scene_yaml", "U")))
+        model = build_model(scene)
     except SceneError as e:
         raise TrajectoryError(f"{path}: stored scene is invalid ({e})") from None
     except yaml.YAMLError as e:
         raise TrajectoryError(f"{path}: stored scene is invalid ({yaml_problem(e)})") from None
+    if version >= 3:
+        _check_names(path, data, column_names(model))
+    stiffness, damping = data["stiffness"], data.get("damping")
+    for name, values in (("stiffness", stiffness), ("damping", damping)):
+        if values is not None and values.shape != (len(model.hinges),):
+            raise TrajectoryError(f"{path}: {name} has shape {values.shape}; the stored scene's "
+                                  f"model has {len(model.hinges)} hinges")
+    model = model.with_stiffness(stiffness, damping)  # version 2: c follows k, as it ran
     energy = {k[len("energy_"):]: v for k, v in data.items() if k.startswith("energy_")}
     run = {name: _scalar(path, data, name, kind) for name, kind in _SCALARS.items()}
     status = run["status"]
@@ -118,7 +185,39 @@ def load_trajectory(path):
     if run["success"] != (status == Status.REACHED_T_END):
         raise TrajectoryError(f"{path}: success {run['success']} contradicts status {status}")
     result = SimulationResult(**{k: data[k] for k in _ARRAYS}, energy=energy, **run)
-    return result, scene, data["stiffness"]
+    return StoredTrajectory(result, scene, model, stiffness,
+                            np.array([h.c for h in model.hinges]), version)
+
+
+def _what_else(path) -> str:
+    """Why ``path`` (an existing non-zip) is not a trajectory file, and what it may be."""
+    if path.is_dir():
+        if (path / "metadata.yaml").is_file():
+            return ("a rosbag2 folder, not a trajectory file: convert it to MCAP "
+                    "(ros2 bag convert) and give the .mcap file")
+        return "is a folder, not a trajectory file"
+    with open(path, "rb") as f:
+        head = f.read(16)
+    if head.startswith(b"SQLite format 3"):
+        return ("an SQLite file (a rosbag2 .db3?), not a trajectory file: convert the bag to "
+                "MCAP (ros2 bag convert) and give the .mcap file")
+    return "not a trajectory file (expected an .npz archive)"
+
+
+def _check_names(path, data, expected):
+    """The stored name arrays must be 1-d text and equal the model's."""
+    for name, want in expected.items():
+        a = data[name]
+        if a.dtype.kind != "U" or a.ndim != 1:
+            raise TrajectoryError(f"{path}: {name}: expected a 1-d array of text, got {a.dtype} "
+                                  f"with shape {a.shape}")
+        got = [str(x) for x in a]
+        if got != want:
+            i = next((i for i, (g, w) in enumerate(zip(got, want)) if g != w), min(len(got), len(want)))
+            held = shown(got[i]) if i < len(got) else "nothing"
+            wanted = shown(want[i]) if i < len(want) else "nothing"
+            raise TrajectoryError(f"{path}: {name}[{i}] is {held}; the stored scene's model has "
+                                  f"{wanted} there ({len(want)} names)")
 
 
 #: Bytes per body and sample of a trajectory, with room: pose, velocities
@@ -220,7 +319,13 @@ def _check_arrays(path, data):
         if name.startswith("energy_") and (data[name].dtype.kind not in "fiu"
                                            or data[name].shape != (s,)):
             raise TrajectoryError(f"{path}: {name} has shape {data[name].shape}, expected ({s},)")
-    k = data["stiffness"]
-    if k.dtype.kind not in "fiu" or k.ndim != 1:
-        raise TrajectoryError(f"{path}: stiffness: expected a 1-d array of numbers, got "
-                              f"{k.dtype} with shape {k.shape}")
+    for name in ("stiffness", "damping"):
+        k = data.get(name)
+        if k is None:
+            continue
+        if k.dtype.kind not in "fiu" or k.ndim != 1:
+            raise TrajectoryError(f"{path}: {name}: expected a 1-d array of numbers, got "
+                                  f"{k.dtype} with shape {k.shape}")
+        if not np.all((k >= 0) & np.isfinite(k)):  # NaN fails too
+            i = int(np.argmin((k >= 0) & np.isfinite(k)))
+            raise TrajectoryError(f"{path}: {name}[{i}] = {k[i]}: expected a finite number >= 0")

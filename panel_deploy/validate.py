@@ -360,14 +360,13 @@ def finite_number(value, flag: str, *, low=None, high=None, low_open=False, inte
 POSE_TOLERANCE = 1e-6
 
 
-def check_stored_trajectory(where, result, model, stiffness=None):
+def check_stored_trajectory(where, result, model):
     """A loaded trajectory checked against the model of its stored scene.
 
     ``t``, ``theta`` and ``omega`` must be finite (first bad index named);
     theta/omega must have one column per coordinate of ``model``; stored poses
     (if ``result`` has them) must have one row per body and agree with the
-    poses recomputed from theta within :data:`POSE_TOLERANCE`; ``stiffness``
-    (if given) one value per hinge. Raises
+    poses recomputed from theta within :data:`POSE_TOLERANCE`. Raises
     :class:`~panel_deploy.errors.TrajectoryError` naming ``where`` and the array.
     """
     from .errors import TrajectoryError
@@ -383,9 +382,6 @@ def check_stored_trajectory(where, result, model, stiffness=None):
         if a.ndim != 2 or a.shape[1] != n:
             raise TrajectoryError(f"{where}: {name} has shape {a.shape}; the stored scene's "
                                   f"model has {n} hinge coordinates")
-    if stiffness is not None and np.shape(stiffness) != (len(model.hinges),):
-        raise TrajectoryError(f"{where}: stiffness has shape {np.shape(stiffness)}; the stored "
-                              f"scene's model has {len(model.hinges)} hinges")
     rotation, position = getattr(result, "rotation", None), getattr(result, "position", None)
     if rotation is None or position is None:
         return

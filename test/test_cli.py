@@ -48,7 +48,7 @@ def test_simulate_saves_and_collide_reads_back(capsys, tmp_path):
     s = json.loads(out)
     assert code == 0 and s["success"] and s["closure"] == "penalty"
     assert s["energy_balance_error"] < 1e-6 and s["collision"]["collided"] is False
-    result, scene, k = load_trajectory(out_file)
+    result, scene, _, k = load_trajectory(out_file)[:4]
     assert result.theta.shape == (401, 11) and scene.name == "paper_4x4"
     assert np.allclose(k, 0.1) and result.t[-1] == pytest.approx(0.01)
     # the run's own record comes back with it: scheme, counters, cut-hinge angles
@@ -104,7 +104,7 @@ def test_simulate_takes_stiffness_from_a_result_file(capsys, tmp_path):
     code, _, _ = run(capsys, "simulate", PAPER, "--t-end", "0.004", "--method", "compiled",
                      "--stiffness", str(stiff), "--out", str(out_file))
     assert code == 0
-    assert np.allclose(load_trajectory(out_file)[2], [k[n] for n in names])
+    assert np.allclose(load_trajectory(out_file).stiffness, [k[n] for n in names])
     # A result optimised under other dampers: simulated with the scene's, and said so.
     # 0.04302: the scene's 0.043 to the four figures the note prints, so no note
     for beta, noted in ((0.043, False), (0.04302, False), (0.19, True)):
@@ -432,7 +432,7 @@ def rewrite(src, dst, **changes):
 
 
 def test_trajectory_records_the_flags_the_run_used(trajectory):
-    _, scene, _ = load_trajectory(trajectory)
+    scene = load_trajectory(trajectory).scene
     assert scene.closure.method == "exact" and scene.data["closure"]["method"] == "exact"
     assert scene.simulation.t_end == 0.01 and scene.data["simulation"]["method"] == "compiled"
 
@@ -624,5 +624,5 @@ def test_an_output_that_cannot_be_written_is_one_line(tmp_path, target, limit, e
         assert rescued == []
     else:
         assert [str(p) for p in rescued] == [lines[-1].rsplit("saved in ", 1)[1]]
-        result, scene, _ = load_trajectory(rescued[0])
+        result, scene = load_trajectory(rescued[0])[:2]
         assert result.t[-1] == pytest.approx(0.3) and scene.name == "paper_4x4"

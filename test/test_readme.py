@@ -26,7 +26,7 @@ import pytest
 from panel_deploy.cli import build_parser
 
 ROOT = Path(__file__).resolve().parent.parent
-DOCUMENTS = [ROOT / "README.md", ROOT / "docs" / "findings.md"]
+DOCUMENTS = [ROOT / "README.md", ROOT / "docs" / "findings.md", ROOT / "docs" / "formats.md"]
 
 FENCE = re.compile(r"^```[^\n]*\n(.*?)^```", re.S | re.M)
 INLINE = re.compile(r"`([^`]+)`")  # a span may run over a line break

@@ -28,13 +28,12 @@ def collide_command(args) -> int:
     if mcap:
         from ..record.analysis import recording_trajectory
         result, scene = recording_trajectory(args.trajectory, args.scene)
-        stiffness = None
+        model = build_model(scene)
     elif args.scene:
         raise SceneError("--scene", "only for an MCAP recording; a .npz trajectory carries its scene")
     else:
-        result, scene, stiffness = load_trajectory(args.trajectory)
-    model = build_model(scene)
-    check_stored_trajectory(args.trajectory, result, model, stiffness)
+        result, scene, model = load_trajectory(args.trajectory)[:3]
+    check_stored_trajectory(args.trajectory, result, model)
     report = check_trajectory(model, result, CollisionSettings.from_scene(scene))
     failed = getattr(result, "success", True) is False
     out = report.to_dict()

@@ -149,7 +149,7 @@ def stream_costs(scene, repeats):
     """Per-update cost of StreamCheck on the paper deployment at 1 kHz and 200 Hz, ms."""
     from panel_deploy.dynamics import simulate
     from panel_deploy.collision import StreamCheck
-    from panel_deploy.live import DynamicsParameters, configure
+    from panel_deploy.configure import DynamicsParameters, configure
 
     print("\nstreaming check, refine on, per update (median of", max(1, repeats // 2), "runs), ms")
     print(f"{'stream':22s} {'samples':>7s} {'median':>7s} {'mean':>7s} {'p99':>7s} {'max':>7s} {'delay':>7s}")

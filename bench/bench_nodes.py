@@ -33,9 +33,10 @@ import numpy as np  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
+from panel_deploy import contract  # noqa: E402
 from panel_deploy.dynamics import simulate  # noqa: E402
 from panel_deploy.dynamics.report import hinge_states  # noqa: E402
-from panel_deploy.live import DynamicsParameters, configure  # noqa: E402
+from panel_deploy.configure import DynamicsParameters, configure  # noqa: E402
 from panel_deploy.nodes import messages  # noqa: E402
 from panel_deploy.scene import load_scene, resolve_scene  # noqa: E402
 from ros_harness import Client, NodeProcess, wait_for  # noqa: E402
@@ -53,7 +54,7 @@ def dynamics_throughput(client, repeats):
         start = time.perf_counter()
         simulate(model, scene.simulation)
         core.append(time.perf_counter() - start)
-    states = client.listen(JointState, "/joint_states", messages.STREAM)
+    states = client.listen(JointState, "/joint_states", messages.qos(contract.STREAM))
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")
     received, published = [], []
     for _ in range(repeats):
@@ -109,7 +110,7 @@ def monitor_cost(rate_hz=1000.0):
 
 
 def monitor_live(client, msgs, rate_hz=1000.0):
-    publisher = client.node.create_publisher(JointState, "/joint_states", messages.STREAM)
+    publisher = client.node.create_publisher(JointState, "/joint_states", messages.qos(contract.STREAM))
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")
     wait_for(lambda: publisher.get_subscription_count() >= 1, what="the monitor")
     client.trigger("/collision_monitor/reset")
@@ -141,13 +142,13 @@ def event_latency(client):
     scene, model = paper(200.0, t_end=0.6)
     result = simulate(model, scene.simulation)
     names, theta, omega, torque = hinge_states(model, result)
-    publisher = client.node.create_publisher(JointState, "/joint_states", messages.STREAM)
+    publisher = client.node.create_publisher(JointState, "/joint_states", messages.qos(contract.STREAM))
     events = client.listen(DiagnosticArray, "/panel_deploy/collision_events")
     client.trigger("/collision_monitor/reset")
     events.clear()
     sent, arrived = {}, []
     client.node.create_subscription(DiagnosticArray, "/panel_deploy/collision_events",
-                                    lambda _: arrived.append(time.perf_counter()), messages.EVENTS)
+                                    lambda _: arrived.append(time.perf_counter()), messages.qos(contract.EVENTS))
     start = time.perf_counter()
     for j in range(len(result.t)):
         # Sleep, not spin: a busy loop here would take a core from the monitor.

@@ -30,7 +30,7 @@ import numpy as np
 from panel_deploy.collision import CollisionSettings, StreamCheck, check_trajectory
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_states
-from panel_deploy.live import DynamicsParameters, configure
+from panel_deploy.configure import DynamicsParameters, configure
 from panel_deploy.scene import load_scene, resolve_scene
 
 SIGMAS = (1e-4, 1e-3, 3e-3)

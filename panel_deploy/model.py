@@ -23,6 +23,11 @@ from typing import Literal
 import numpy as np
 
 from .errors import ModelError
+from .scene import SimulationSection
+
+#: The array is flat once every hinge (cut hinges included) has |theta| at most
+#: this, rad: the default of the scene's ``simulation.flat_tolerance``.
+FLAT_TOLERANCE = SimulationSection.flat_tolerance
 
 ClosureMethod = Literal["penalty", "exact"]
 
@@ -330,6 +335,12 @@ class Model:
                    tuple(body_joint), tuple(order), cut_hinges, float(k_s), float(c_s),
                    closure, gravity, pairs, str(name),
                    tuple(tuple(int(i) for i in g) for g in hinge_groups))
+
+
+def hinge_order(model: Model) -> list:
+    """Hinge indices in report order: tree coordinates, then cut hinges (the
+    order of ``/joint_states`` and of every per-hinge report)."""
+    return list(model.joints) + list(model.cut_hinges)
 
 
 def _bfs_tree(nb, hinges, ground, exclude):

@@ -19,7 +19,7 @@ import numpy as np
 
 from .dynamics.kernels import loop_residual
 from .dynamics.pack import pack
-from .dynamics.report import hinge_order
+from .model import hinge_order
 from .errors import TrajectoryError
 from .model import Model
 

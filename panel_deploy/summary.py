@@ -7,7 +7,7 @@ this module only puts them together for the CLI, the nodes and recordings.
 from __future__ import annotations
 
 from .dynamics import dynamics_summary
-from .dynamics.report import FLAT_TOLERANCE
+from .model import FLAT_TOLERANCE
 
 
 def deployment_summary(model, result, collision=None, *, flat_tolerance=FLAT_TOLERANCE) -> dict:

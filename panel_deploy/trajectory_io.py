@@ -96,13 +96,13 @@ def save_trajectory(path, result: SimulationResult, scene, model, flag: str = "-
     """Write ``result`` with what is needed to rebuild its model; returns the path.
 
     The stored scene carries ``model``'s k per hinge (as
-    :func:`~panel_deploy.live.scene_yaml` writes it) and ``damping`` its c,
+    :func:`~panel_deploy.scene_text.scene_yaml` writes it) and ``damping`` its c,
     so that the file says exactly what ran. Atomic; if the write fails, the
     trajectory is saved in a fallback file and the
     :class:`~panel_deploy.errors.PanelDeployError` (naming ``flag``) says
     where (:func:`~panel_deploy.validate.write_atomic`).
     """
-    from .live import scene_yaml
+    from .scene_text import scene_yaml
     from .validate import write_atomic
 
     path = Path(path)

@@ -16,6 +16,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
+from panel_deploy import contract
 from panel_deploy.nodes import messages
 
 BIN = Path(sys.executable).parent
@@ -54,7 +55,7 @@ class Client:
         while not self._closing.is_set():
             self.executor.spin_once(timeout_sec=0.05)
 
-    def listen(self, msg_type, topic, qos=messages.EVENTS):
+    def listen(self, msg_type, topic, qos=messages.qos(contract.EVENTS)):
         """The list every message on ``topic`` is appended to (one subscription per topic)."""
         if topic not in self.received:
             self.received[topic] = []

@@ -14,7 +14,8 @@ from panel_deploy.collision.stream import KEEP
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_states
 from panel_deploy.errors import TrajectoryError
-from panel_deploy.live import DynamicsParameters, Throttle, configure
+from panel_deploy.configure import DynamicsParameters, configure
+from panel_deploy.timing import Throttle
 from panel_deploy.scene import load_scene, resolve_scene
 from panel_deploy.sensing import LoopSolver
 

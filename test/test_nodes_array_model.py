@@ -9,9 +9,10 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
+from panel_deploy import contract
 from panel_deploy.build import build_model
 from panel_deploy.kinematics import forward_kinematics
-from panel_deploy.live import scene_from_yaml
+from panel_deploy.scene_text import scene_from_yaml
 from panel_deploy.nodes import messages
 from panel_deploy.scene import load_scene, resolve_scene
 from ros_harness import Client, NodeProcess, wait_for
@@ -31,7 +32,7 @@ def node(compiled_nodes):
 
 
 def latest(client, topic):
-    box = client.listen(String, topic, messages.LATCHED)
+    box = client.listen(String, topic, messages.qos(contract.LATCHED))
     wait_for(lambda: box, what=f"a message on {topic}")
     return box[-1].data
 

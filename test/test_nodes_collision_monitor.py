@@ -12,10 +12,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from visualization_msgs.msg import Marker, MarkerArray
 
+from panel_deploy import contract
 from panel_deploy.collision import CollisionSettings, check_trajectory
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_states
-from panel_deploy.live import DynamicsParameters, configure
+from panel_deploy.configure import DynamicsParameters, configure
 from panel_deploy.nodes import messages
 from panel_deploy.scene import load_scene, resolve_scene
 
@@ -36,7 +37,7 @@ def graph(compiled_nodes):
     model = NodeProcess("array_model", "scene:=paper_4x4")
     monitor = NodeProcess("collision_monitor")
     client = Client("monitor_test")
-    publisher = client.node.create_publisher(JointState, "/joint_states", messages.STREAM)
+    publisher = client.node.create_publisher(JointState, "/joint_states", messages.qos(contract.STREAM))
     events = client.listen(DiagnosticArray, "/panel_deploy/collision_events")
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")
     markers = client.listen(MarkerArray, "/panel_deploy/collision_markers")
@@ -146,7 +147,7 @@ def test_an_alias_bomb_on_the_model_topic_is_ignored_at_once(graph, deployment):
     # one such message from anyone on the graph took down collision_monitor and dynamics
     client, publisher, events, diagnostics, markers = graph
     model, result, report = deployment
-    bomb = client.node.create_publisher(String, "/panel_deploy/model", messages.LATCHED)
+    bomb = client.node.create_publisher(String, "/panel_deploy/model", messages.qos(contract.LATCHED))
     diagnostics.clear()
     bomb.publish(String(data=alias_bomb(key="array")))
     wait_for(lambda: any("ignored a model" in s.message and "aliases expand it beyond" in s.message

@@ -13,9 +13,10 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
+from panel_deploy import contract
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_states
-from panel_deploy.live import DynamicsParameters, configure
+from panel_deploy.configure import DynamicsParameters, configure
 from panel_deploy.nodes import load, messages
 from panel_deploy.scene import load_scene, resolve_scene
 from ros_harness import Client, NodeProcess, wait_for
@@ -54,7 +55,7 @@ def deploy(client, node="/dynamics"):
 
 
 def deploy_and_collect(client):
-    states = client.listen(JointState, "/joint_states", messages.STREAM)
+    states = client.listen(JointState, "/joint_states", messages.qos(contract.STREAM))
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")
     clocks = client.listen(Clock, "/clock")
     panels = client.listen(MarkerArray, "/panel_deploy/panels")
@@ -247,7 +248,7 @@ def test_sigint_mid_deployment_stops_it_and_ends_cleanly(compiled_nodes):
                            namespace="/interrupted")
     client = Client("dynamics_interrupt_test")
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")
-    states = client.listen(JointState, "/interrupted/joint_states", messages.STREAM)
+    states = client.listen(JointState, "/interrupted/joint_states", messages.qos(contract.STREAM))
     try:
         reply = deploy(client, "/interrupted/dynamics")
         assert reply.success, reply.message

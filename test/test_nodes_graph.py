@@ -13,7 +13,7 @@ from ros_harness import Client, NodeProcess
 
 from panel_deploy.collision import CollisionSettings, check_trajectory
 from panel_deploy.dynamics import simulate
-from panel_deploy.live import DynamicsParameters, configure
+from panel_deploy.configure import DynamicsParameters, configure
 from panel_deploy.nodes import load
 from panel_deploy.scene import load_scene, resolve_scene
 

@@ -13,10 +13,11 @@ from rclpy.parameter import Parameter
 from ros_harness import Client, NodeProcess, wait_for
 from sensor_msgs.msg import JointState
 
+from panel_deploy import contract
 from panel_deploy.collision import CollisionSettings, check_trajectory
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_states
-from panel_deploy.live import DynamicsParameters, configure
+from panel_deploy.configure import DynamicsParameters, configure
 from panel_deploy.nodes import messages
 from panel_deploy.scene import load_scene, resolve_scene
 
@@ -39,7 +40,7 @@ def graph(compiled_nodes):
     model = NodeProcess("array_model", "scene:=paper_4x4")
     monitor = NodeProcess("collision_monitor")
     client = Client("monitor_streams_test")
-    publisher = client.node.create_publisher(JointState, "/joint_states", messages.STREAM)
+    publisher = client.node.create_publisher(JointState, "/joint_states", messages.qos(contract.STREAM))
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")
     events = client.listen(DiagnosticArray, "/panel_deploy/collision_events")
     wait_for(lambda: publisher.get_subscription_count() >= 1, what="the monitor")

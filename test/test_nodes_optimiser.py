@@ -7,6 +7,7 @@ from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
+from panel_deploy import contract
 from panel_deploy.nodes import messages
 from ros_harness import Client, NodeProcess, wait_for
 
@@ -21,7 +22,7 @@ def graph(compiled_nodes):
                          f"damping_ratio_bounds:=[{LUBRICANT[0]},{LUBRICANT[1]}]")]
     client = Client("optimiser_test")
     progress = client.listen(DiagnosticArray, "/optimiser/progress")
-    results = client.listen(String, "/optimiser/result", messages.LATCHED)
+    results = client.listen(String, "/optimiser/result", messages.qos(contract.LATCHED))
     yield client, progress, results
     client.close()
     for p in procs:

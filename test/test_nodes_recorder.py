@@ -18,7 +18,7 @@ from panel_deploy.collision import CollisionSettings, check_trajectory
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_states
 from panel_deploy.export.urdf import link_poses
-from panel_deploy.live import DynamicsParameters, configure
+from panel_deploy.configure import DynamicsParameters, configure
 from panel_deploy.scene import load_scene, resolve_scene
 
 CLI = str(Path(sys.executable).parent / "panel-deploy")

@@ -14,6 +14,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 from rosbags.typesys import Stores, get_typestore  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
+from panel_deploy import contract
 from panel_deploy.build import build_model  # noqa: E402
 from panel_deploy.export.urdf import link_poses  # noqa: E402
 from panel_deploy.kinematics import forward_kinematics  # noqa: E402
@@ -49,11 +50,11 @@ def run(compiled_nodes):
 
 
 def _deploy_both(client):
-    states = {ns: client.listen(JointState, f"{ns}/joint_states", messages.STREAM) for ns in ARRAYS}
-    tf = client.listen(TFMessage, "/tf", messages.TF)
-    static = client.listen(TFMessage, "/tf_static", messages.LATCHED)
+    states = {ns: client.listen(JointState, f"{ns}/joint_states", messages.qos(contract.STREAM)) for ns in ARRAYS}
+    tf = client.listen(TFMessage, "/tf", messages.qos(contract.EVENTS))
+    static = client.listen(TFMessage, "/tf_static", messages.qos(contract.LATCHED))
     raw = []
-    client.node.create_subscription(TFMessage, "/tf", raw.append, messages.TF, raw=True)
+    client.node.create_subscription(TFMessage, "/tf", raw.append, messages.qos(contract.EVENTS), raw=True)
     wait_for(lambda: client.node.count_publishers("/tf") >= len(ARRAYS), what="the /tf publishers")
     for ns in ARRAYS:
         replies = []

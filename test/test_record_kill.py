@@ -21,7 +21,7 @@ from panel_deploy.scene import load_scene, resolve_scene
 #: sample as the simulation hands it out (computed), before it is recorded.
 CHILD = """
 import sys
-from panel_deploy import live
+from panel_deploy.dynamics import deployment as live
 from panel_deploy.cli import main
 
 iterate = live.Deployment.__iter__

@@ -27,12 +27,17 @@ from panel_deploy.build import build_model
 from panel_deploy.cli import main
 from panel_deploy.dynamics.report import hinge_states
 from panel_deploy.export.urdf import link_poses, model_urdf
-from panel_deploy.live import scene_from_yaml
+from panel_deploy.scene_text import scene_from_yaml
 from panel_deploy.record import messages as m
 from panel_deploy.pipeline import simulate_scene
 from panel_deploy.scene import load_scene, resolve_scene
 
 PER_SAMPLE = ("/clock", "/joint_states", "/panel_deploy/panels", "/tf")
+#: Latched topics, as ROS users expect them (a late subscriber gets the last message).
+LATCHED = ("/robot_description", "/panel_deploy/model", "/tf_static", "/dynamics/scene",
+           "/optimiser/result")
+#: What simulate --record has no source for: no optimiser runs.
+NOT_SIMULATED = ("/optimiser/progress", "/optimiser/result")
 
 
 @pytest.fixture(scope="module")
@@ -73,11 +78,12 @@ def test_mcap_reader_summary_counts_and_chunks(recorded):
                    (m.TOPICS[topic][0], "ros2msg", "cdr")
             assert channel.metadata["topic_type_hash"] == m.type_hash(schema.name)
             qos = yaml.safe_load(channel.metadata["offered_qos_profiles"])[0]
-            assert qos["durability"] == ("transient_local" if topic in
-                                         ("/robot_description", "/panel_deploy/model", "/tf_static")
-                                         else "volatile")
-            assert counts[channel.id] == (s if topic in PER_SAMPLE else 1)
-        assert summary.statistics.message_count == 4 * s + 5
+            assert qos["durability"] == ("transient_local" if topic in LATCHED else "volatile")
+            assert qos["depth"] == (5000 if topic in ("/joint_states", "/clock") else
+                                    1 if topic in LATCHED else 100)
+            assert counts.get(channel.id, 0) == (s if topic in PER_SAMPLE else
+                                                 0 if topic in NOT_SIMULATED else 1)
+        assert summary.statistics.message_count == 4 * s + 7
         assert summary.statistics.message_end_time == round(result.t[-1] * 1e9)
         chunks = summary.chunk_indexes
         assert len(chunks) >= 8 and all(c.compression == "zstd" for c in chunks)
@@ -98,7 +104,8 @@ def test_mcap_reader_summary_counts_and_chunks(recorded):
     bag = yaml.safe_load(meta["rosbag2"]["serialized_metadata"])
     assert bag["version"] == 9 and bag["storage_identifier"] == "mcap"
     assert {t["topic_metadata"]["name"]: t["message_count"] for t in bag["topics_with_message_count"]} \
-        == {topic: (len(result.t) if topic in PER_SAMPLE else 1) for topic in m.TOPICS}
+        == {topic: (len(result.t) if topic in PER_SAMPLE else 0 if topic in NOT_SIMULATED else 1)
+            for topic in m.TOPICS}
 
 
 def _rosbags_messages(path):
@@ -186,7 +193,7 @@ def test_rclpy_deserializes_every_message_to_the_same_content(recorded):
             theirs = deserialize_message(message.data, types[schema.name])
             _same(ours, theirs)
             decoded += 1
-    assert decoded == 3 * len(recorded[4].t) + 4
+    assert decoded == 3 * len(recorded[4].t) + 6  # 3 strings, markers of the collision, 2 diagnostics
 
 
 def _same(ours, theirs):

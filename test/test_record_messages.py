@@ -14,11 +14,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from panel_deploy.frames import quaternions
 from panel_deploy.build import build_model
-from panel_deploy.dynamics.report import hinge_order
+from panel_deploy.model import hinge_order
 from panel_deploy.export.urdf import link_poses
 from panel_deploy.kinematics import forward_kinematics
-from panel_deploy.live import Sample
+from panel_deploy.dynamics.deployment import Sample
 from panel_deploy.record import messages as m
 from panel_deploy.record.cdr import SampleEncoder
 from panel_deploy.scene import load_scene, resolve_scene
@@ -47,7 +48,7 @@ def _samples(model, names, count=12, seed=0):
 def test_quaternions_match_scipy_up_to_sign():
     R = Rotation.random(500, random_state=3).as_matrix()
     R = np.concatenate([R, np.eye(3)[None], Rotation.from_rotvec([[np.pi, 0, 0]]).as_matrix()])
-    q = m.quaternions(R)
+    q = quaternions(R)
     assert np.all(q[:, 3] >= 0) and np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-15)
     assert np.allclose(Rotation.from_quat(q).as_matrix(), R, atol=1e-14)
 

@@ -25,7 +25,7 @@ from collections import deque
 
 import numpy as np
 
-from ..dynamics.report import hinge_order
+from ..model import hinge_order
 from ..errors import TrajectoryError
 from ..model import Model
 from ..sensing import LoopSolver

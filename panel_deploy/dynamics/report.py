@@ -5,24 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model import Model
-from ..scene import SimulationSection
+from ..model import FLAT_TOLERANCE, Model, hinge_order
 from .kernels import cut_rates, hinge_law
 from .pack import pack
 from .result import SimulationResult
 
 #: A hinge has left its stowed angle once |theta - theta_stowed| exceeds this, rad.
 RELEASE_TOL = 1e-2
-#: The array is flat once every hinge (cut hinges included) has |theta| at most
-#: this, rad: the default of the scene's ``simulation.flat_tolerance``.
-FLAT_TOLERANCE = SimulationSection.flat_tolerance
-
-
-def hinge_order(model: Model) -> list:
-    """Hinge indices in report order: tree coordinates, then cut hinges."""
-    return list(model.joints) + list(model.cut_hinges)
-
-
 def hinge_angles(model: Model, result: SimulationResult):
     """Names and angles (s, n_hinges) of every hinge, in :func:`hinge_order`."""
     idx = hinge_order(model)

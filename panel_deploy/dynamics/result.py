@@ -19,6 +19,10 @@ class Status(IntEnum):
     message says where and what)."""
 
     REACHED_T_END = 0
+    #: Stopped on request before t_end (the dynamics node's ``~/stop``, Ctrl-C):
+    #: not a failure of the integration, but not a whole run either, so
+    #: ``success`` is False (unlike scipy's 1, an event's termination).
+    STOPPED = 1
     #: The step size fell below round-off of t (or a scipy solver gave up: its
     #: failures are step-size failures).
     STEP_COLLAPSE = -1
@@ -63,9 +67,9 @@ class SimulationResult:
         from the body poses; empty second axis for a tree).
     success : bool
     status : Status
-        0 (``Status.REACHED_T_END``), or the negative code of the failure:
-        -1 step-size collapse, -2 non-finite state, -3 loop-closure gap
-        above its limit, -4 step budget exhausted.
+        0 (``Status.REACHED_T_END``), 1 stopped on request, or the negative
+        code of the failure: -1 step-size collapse, -2 non-finite state, -3
+        loop-closure gap above its limit, -4 step budget exhausted.
     message : str
     nfev, njev, nlu, nsteps, nswitches : int
         Right-hand-side and Jacobian evaluations, LU decompositions, steps,

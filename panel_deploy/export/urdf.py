@@ -62,6 +62,7 @@ import math
 
 import numpy as np
 
+from ..contract import WORLD
 from ..model import Model
 from .mjcf import _f, _name, _vec
 
@@ -70,8 +71,6 @@ from .mjcf import _f, _name, _vec
 #: and nothing enforces it.
 VELOCITY_LIMIT = 100.0
 
-#: Name of the root link, the model's ground (flat array) frame.
-WORLD = "world"
 
 #: rgba of the ground panel and of the other panels.
 GROUND_RGBA = (0.85, 0.55, 0.2, 1.0)

@@ -8,11 +8,11 @@ them and republishes, or refuses with the reason and keeps the old model.
 from __future__ import annotations
 
 from rclpy.node import Node
-from std_msgs.msg import String
 
+from .. import contract
 from ..errors import PanelDeployError
 from ..export.urdf import model_urdf
-from ..live import load_array
+from ..configure import load_array
 from . import messages, runtime
 
 PARAMETERS = {
@@ -25,9 +25,9 @@ class ArrayModelNode(Node):
     def __init__(self, **kwargs):
         super().__init__("array_model", **kwargs)
         runtime.declare(self, PARAMETERS, self._check)
-        self.description = self.create_publisher(String, "robot_description", messages.LATCHED)
-        self.model_pub = self.create_publisher(String, "panel_deploy/model", messages.LATCHED)
-        runtime.trigger_service(self, "~/reload", self._reload)
+        self.description = runtime.publisher(self, contract.ROBOT_DESCRIPTION)
+        self.model_pub = runtime.publisher(self, contract.MODEL)
+        runtime.trigger_service(self, contract.RELOAD, self._reload)
         self.scene, self.model, text = load_array(**runtime.values(self, PARAMETERS))
         self._publish(text)
 

@@ -18,17 +18,15 @@ from __future__ import annotations
 import math
 import re
 
-from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
-from std_msgs.msg import String
-from visualization_msgs.msg import MarkerArray
 
+from .. import contract
 from ..build import build_model
 from ..collision import CollisionSettings, StreamCheck
 from ..errors import PanelDeployError, SceneError, shown
 from ..kinematics import forward_kinematics
-from ..live import Throttle, scene_from_yaml
+from ..timing import Throttle
+from ..scene_text import scene_from_yaml
 from . import messages, runtime
 
 PARAMETERS = {
@@ -53,14 +51,12 @@ class CollisionMonitorNode(Node):
         self.status_name = self.get_fully_qualified_name()
         runtime.declare(self, PARAMETERS, self._collision)
         self.add_post_set_parameters_callback(self._apply)
-        self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", messages.EVENTS)
-        self.events = self.create_publisher(DiagnosticArray, "panel_deploy/collision_events",
-                                            messages.EVENTS)
-        self.markers = self.create_publisher(MarkerArray, "panel_deploy/collision_markers",
-                                             messages.EVENTS)
-        self.create_subscription(String, "panel_deploy/model", self._on_model, messages.LATCHED)
-        self.create_subscription(JointState, "joint_states", self._on_joint_state, messages.STREAM)
-        runtime.trigger_service(self, "~/reset", self._reset)
+        self.diagnostics = runtime.publisher(self, contract.DIAGNOSTICS)
+        self.events = runtime.publisher(self, contract.COLLISION_EVENTS)
+        self.markers = runtime.publisher(self, contract.COLLISION_MARKERS)
+        runtime.subscription(self, contract.MODEL, self._on_model)
+        runtime.subscription(self, contract.JOINT_STATES, self._on_joint_state)
+        runtime.trigger_service(self, contract.RESET, self._reset)
         self._throttle = Throttle()
         self._receipt = self.get_parameter("stamps").value == "receipt"  # read per message
         self.create_timer(0.5, self._publish_verdict)

@@ -18,19 +18,18 @@ node says so once and publishes no /tf.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import fields
 
-from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.parameter import Parameter
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
-from visualization_msgs.msg import MarkerArray
 
+from .. import contract
 from ..errors import PanelDeployError, shown
-from ..live import Deployment, DynamicsParameters, Pacer, configure
+from ..dynamics.deployment import Deployment
+from ..configure import DynamicsParameters, configure
+from ..timing import Pacer
+from ..scene_text import scene_yaml
 from ..summary import deployment_summary
 from . import messages, runtime
 
@@ -63,21 +62,21 @@ class DynamicsNode(runtime.WorkerNode):
     def __init__(self, **kwargs):
         super().__init__("dynamics", **kwargs)
         runtime.declare(self, PARAMETERS, self._check)
-        self.joint_states = self.create_publisher(JointState, "joint_states", messages.STREAM)
-        self.panels = self.create_publisher(MarkerArray, "panel_deploy/panels", messages.EVENTS)
-        self.clock = self.create_publisher(Clock, "/clock", messages.STREAM)
-        self.diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", messages.EVENTS)
+        self.joint_states = runtime.publisher(self, contract.JOINT_STATES)
+        self.panels = runtime.publisher(self, contract.PANELS)
+        self.clock = runtime.publisher(self, contract.CLOCK_TOPIC)
+        self.diagnostics = runtime.publisher(self, contract.DIAGNOSTICS)
+        self.deployed = runtime.publisher(self, contract.DEPLOYED_SCENE)
         # Absolute, as tf2's own: a namespaced array keeps its frames apart by frame_prefix.
         if messages.TFMessage is None:
             self.tf = self.tf_static = None
             self.get_logger().warning("tf2_msgs is not installed: no /tf or /tf_static "
                                       "(pip install ./vendor/tf2_msgs, see the README)")
         else:
-            self.tf = self.create_publisher(messages.TFMessage, "/tf", messages.TF)
-            self.tf_static = self.create_publisher(messages.TFMessage, "/tf_static",
-                                                   messages.LATCHED)
-        runtime.trigger_service(self, "~/deploy", self._deploy)
-        runtime.trigger_service(self, "~/stop", self._stop)
+            self.tf = runtime.publisher(self, contract.TF)
+            self.tf_static = runtime.publisher(self, contract.TF_STATIC)
+        runtime.trigger_service(self, contract.DEPLOY, self._deploy)
+        runtime.trigger_service(self, contract.STOP, self._stop)
         self.deployment = None  # the current or last Deployment
 
     def parameters(self, changes=None) -> DynamicsParameters:
@@ -106,6 +105,8 @@ class DynamicsNode(runtime.WorkerNode):
             response.success, response.message = False, str(e)
             return response
         self.deployment = Deployment(model, scene.simulation)
+        # What runs, overrides included, before its first sample: recorders and audits need it.
+        self.deployed.publish(messages.string(scene_yaml(scene, model)))
         prefix = self.get_parameter(FRAME_PREFIX).value
         self.start_job("the deployment", self.diagnostics, self._run, self.deployment, scene, params,
                        prefix)
@@ -143,16 +144,10 @@ class DynamicsNode(runtime.WorkerNode):
         published = time.monotonic() - start
         result = deployment.result
         s = deployment_summary(model, result, flat_tolerance=scene.simulation.flat_tolerance)
-        level = messages.OK if result.success and s["time_to_flat"] is not None else (
-            messages.WARN if result.success else messages.ERROR)
-        values = {k: s[k] for k in ("success", "status", "message", "time_to_flat", "t_end",
-                                    "energy_balance_error", "max_constraint_gap", "wall_time",
-                                    "nsteps")}
+        values = contract.outcome_values(s, len(result.t))
         values["publish_wall_time"] = published  # s from the first block to the last message
-        values["samples"] = len(result.t)  # so a client knows when a monitor has checked them all
-        values["summary"] = json.dumps(s)  # as panel-deploy simulate --json prints it
         self.diagnostics.publish(messages.diagnostics(float(result.t[-1]), messages.status(
-            self.get_fully_qualified_name(), level, s["message"], values)))
+            self.get_fully_qualified_name(), contract.outcome_level(s), s["message"], values)))
 
     def _stop(self, request, response):
         if not self.running:

@@ -16,18 +16,15 @@ from pathlib import Path
 
 import rclpy
 import yaml
-from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.validate_namespace import validate_namespace
-from std_msgs.msg import String
 from std_srvs.srv import Trigger
-from visualization_msgs.msg import MarkerArray
 
+from .. import contract
 from ..errors import SceneError, shown
-from ..live import scene_yaml
-from ..record.deployment import outcome_record
+from ..scene_text import scene_yaml
 from ..summary import deployment_text
 from . import messages, runtime
 from .array_model import ArrayModelNode
@@ -51,7 +48,7 @@ class Driver(Node):
         self.group = ReentrantCallbackGroup()
         # The nodes are this node's neighbours: their names resolve in its namespace.
         self.dynamics, self.monitor = (self.resolve_topic_name(n)
-                                       for n in ("dynamics", "collision_monitor"))
+                                       for n in (contract.DEPLOY.node, contract.RESET.node))
         self._triggers = {}
         self.outcome = None   # values of the dynamics node's outcome status
         self.verdict = None   # values of the monitor's last verdict
@@ -62,16 +59,16 @@ class Driver(Node):
         self.shown = -1.0
         self.exit_code = 1
         self.summary = None
-        for msg_type, topic, callback, qos in (
-                (DiagnosticArray, "/diagnostics", self._on_diagnostics, messages.EVENTS),
-                (DiagnosticArray, "panel_deploy/collision_events", self._on_events, messages.EVENTS),
-                (DiagnosticArray, "optimiser/progress", self._on_progress, messages.EVENTS),
-                (String, "optimiser/result", self._on_result, messages.LATCHED),
-                (MarkerArray, "panel_deploy/panels", self._on_panels, messages.EVENTS)):
-            self.create_subscription(msg_type, topic, callback, qos, callback_group=self.group)
+        for topic, callback in ((contract.DIAGNOSTICS, self._on_diagnostics),
+                                (contract.COLLISION_EVENTS, self._on_events),
+                                (contract.OPTIMISER_PROGRESS, self._on_progress),
+                                (contract.OPTIMISER_RESULT, self._on_result),
+                                (contract.PANELS, self._on_panels)):
+            runtime.subscription(self, topic, callback, callback_group=self.group)
 
-    def call(self, service: str, retry: str = "no model yet") -> str:
+    def call(self, service: contract.Service, retry: str = "no model yet") -> str:
         """Call a Trigger ``service``; again while it refuses with ``retry`` (up to TIMEOUT)."""
+        service = service.path
         if service not in self._triggers:
             self._triggers[service] = self.create_client(Trigger, service, callback_group=self.group)
         client = self._triggers[service]
@@ -109,9 +106,9 @@ class Driver(Node):
                 self.search_failed = s.message
                 continue
             v = messages.values(s)
-            print(f"  optimise {s.message:>8}: {v.get('evaluations')} evaluations, best f "
-                  f"{float(v.get('best_f', 'nan')):+.5f}, feasible {v.get('feasible')}, "
-                  f"{float(v.get('elapsed', 0)):.1f} s", file=sys.stderr, flush=True)
+            print(f"  optimise {s.message:>8}: {v['evaluations']} evaluations, best f "
+                  f"{float(v['best_f']):+.5f}, feasible {v['feasible']}, "
+                  f"{float(v['elapsed']):.1f} s", file=sys.stderr, flush=True)
 
     def _on_result(self, msg):
         self.result = yaml.safe_load(msg.data)
@@ -124,7 +121,7 @@ class Driver(Node):
         if t - self.shown < 0.1:
             return
         self.shown = t
-        d = _number((self.verdict or {}).get("d", ""))
+        d = (self.verdict or {}).get("d")
         print(f"  t = {t:6.3f} s  smallest distance d = "
               f"{'-' if d is None else f'{d * 1e3:.2f} mm'}  "
               f"collisions {len(self.events)}", file=sys.stderr, flush=True)
@@ -148,7 +145,7 @@ class Driver(Node):
         # dynamics node and the optimiser refuse requests until theirs came.
         self._wait(lambda: self.verdict is not None, "the model to reach the collision monitor")
         if optimise:
-            print(self.call("optimiser/optimise"), file=sys.stderr, flush=True)
+            print(self.call(contract.OPTIMISE), file=sys.stderr, flush=True)
             # The result is published once the optimiser has set its K on the dynamics node.
             self._wait(lambda: self.result is not None or self.search_failed, "the optimiser",
                        timeout=1e9)
@@ -161,12 +158,12 @@ class Driver(Node):
         self._wait(self._monitor_listens, "the collision monitor on joint_states")
         self.events.clear()
         self.deploying = True
-        print(self.call("dynamics/deploy"), file=sys.stderr, flush=True)
+        print(self.call(contract.DEPLOY), file=sys.stderr, flush=True)
         self._wait(lambda: self.outcome is not None, "the deployment", timeout=1e9)
         self._finish()
 
     def _monitor_listens(self) -> bool:
-        topic = self.resolve_topic_name("joint_states")
+        topic = self.resolve_topic_name(contract.JOINT_STATES.name)
         return any(f"{i.node_namespace.rstrip('/')}/{i.node_name}" == self.monitor
                    for i in self.get_subscriptions_info_by_topic(topic))
 
@@ -175,7 +172,7 @@ class Driver(Node):
         if not self.deploying:
             return
         try:
-            self.call("dynamics/stop", retry="")
+            self.call(contract.STOP, retry="")
         except RuntimeError:
             pass  # none running: it has just ended
         try:
@@ -187,42 +184,36 @@ class Driver(Node):
     def _finish(self, interruptible=True) -> None:
         if "summary" not in self.outcome:  # the deployment failed (an ERROR status)
             raise RuntimeError(self.outcome["message"])
-        published = int(self.outcome["samples"])
-        self._wait(lambda: int((self.verdict or {}).get("samples") or 0) >= published,
+        published = self.outcome["samples"]
+        self._wait(lambda: (self.verdict or {}).get("samples", 0) >= published,
                    "the collision monitor", interruptible=interruptible)
         self.summarise()
         if self.recorder is not None:
             got = self.recorder.received
-            self._wait(lambda: got["/joint_states"] >= published and got["/diagnostics"] >= 1,
+            self._wait(lambda: (got[contract.JOINT_STATES.name] >= published
+                                and got[contract.DIAGNOSTICS.name] >= 1),
                        "the recorder", interruptible=interruptible)
             time.sleep(0.2)  # the monitor's last events and verdict, published just now
-            self.recorder.close(outcome_record(self.summary))
+            self.recorder.close(self.summary)
 
     def summarise(self) -> None:
         """The deployment's summary (the outcome's) with the monitor's verdict
         and events as its collision part; sets the exit code."""
-        s = json.loads(self.outcome["summary"])
+        s = self.outcome["summary"]
         v = self.verdict
         pair = v.get("first_collision_pair")
-        first = None if not pair else {"t": float(v["first_collision_t"]), "pair": pair.split(","),
-                                       "v": float(v["approach_speed"])}
+        first = None if not pair else {"t": v["first_collision_t"], "pair": pair,
+                                       "v": v["approach_speed"]}
         s["collision"] = {
             "collided": first is not None, "first_collision": first,
-            "colliding_pairs": [{"pair": e["pair"].split(","), "t": float(e["t"]),
-                                 "approach_speed": float(e["approach_speed"]),
-                                 "distance": float(e["distance"])} for e in self.events],
-            "v": first["v"] if first else 0.0, "d": _number(v.get("d", "")),
-            "d_time": _number(v.get("d_time", "")),
-            "d_pair": v["d_pair"].split(",") if v.get("d_pair") else None,
-            "samples_checked": int(v["samples"])}
+            "colliding_pairs": [{key: e[key] for key in ("pair", "t", "approach_speed", "distance")}
+                                for e in self.events],
+            "v": first["v"] if first else 0.0, "d": v.get("d"), "d_time": v.get("d_time"),
+            "d_pair": v.get("d_pair"), "samples_checked": v["samples"]}
         flat = s["time_to_flat"]
         collided_before_flat = first is not None and (flat is None or first["t"] <= flat)
         self.exit_code = 0 if s["success"] and flat is not None and not collided_before_flat else 1
         self.summary = s
-
-
-def _number(text: str):
-    return None if text in ("", "None") else float(text)
 
 
 def run_graph(scene, *, optimise: bool = False, real_time_factor: float = 1.0,

@@ -8,6 +8,7 @@ the URDF (``world`` is the ground panel's flat frame).
 from __future__ import annotations
 
 import array
+from importlib import import_module
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -20,33 +21,31 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray
 
+from .. import contract
+from ..contract import HIT_COLOUR, PANEL_COLOUR, event_fields
 from ..errors import TrajectoryError, shown
-from ..record.messages import PANEL_COLOUR, event_fields, status_value
-from ..record.messages import ground_transform, quaternions, tree_transforms
+from ..frames import ground_transform, quaternions, tree_transforms
 
 try:  # tf2_msgs has no wheel on PyPI: ``pip install ./vendor/tf2_msgs`` builds it
     from tf2_msgs.msg import TFMessage
 except ImportError:
     TFMessage = None
 
-#: Latched topics (/robot_description, /panel_deploy/model, results): a late
-#: subscriber still gets the last message.
-LATCHED = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
-                     reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
-#: /joint_states and /clock: reliable and deep enough for a whole deployment
-#: computed faster than real time (2 s at 1 kHz), so no subscriber misses a sample.
-STREAM = QoSProfile(depth=5000, history=HistoryPolicy.KEEP_LAST,
-                    reliability=ReliabilityPolicy.RELIABLE)
-#: Everything else.
-EVENTS = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
-                    reliability=ReliabilityPolicy.RELIABLE)
-#: /tf: tf2's own (reliable, volatile, 100 deep); /tf_static is LATCHED, as tf2's.
-TF = EVENTS
-
-FRAME = "world"
+FRAME = contract.WORLD
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
-HIT_COLOUR = (0.95, 0.15, 0.1, 1.0)
+
+
+def message_class(typename: str):
+    """The rclpy message class of a ROS 2 type name (``sensor_msgs/msg/JointState``)."""
+    package, kind, name = typename.split("/")
+    return getattr(import_module(f"{package}.{kind}"), name)
+
+
+def qos(q: contract.QoS) -> QoSProfile:
+    """rclpy's QoSProfile of a contract QoS."""
+    return QoSProfile(depth=q.depth, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy[q.reliability.upper()],
+                      durability=DurabilityPolicy[q.durability.upper()])
 
 
 def stamp(t: float) -> Time:
@@ -227,13 +226,13 @@ def status(name: str, level: int, message: str, values: dict | None = None,
     become key-values (None as empty string)."""
     return DiagnosticStatus(level=level if isinstance(level, bytes) else bytes([level]),
                             name=name, message=message, hardware_id=hardware_id,
-                            values=[KeyValue(key=str(k), value="" if v is None else status_value(v))
+                            values=[KeyValue(key=str(k), value=contract.status_value(v))
                                     for k, v in (values or {}).items()])
 
 
 def values(status: DiagnosticStatus) -> dict:
-    """A status's key-values as ``{key: text}``."""
-    return {kv.key: kv.value for kv in status.values}
+    """A status's key-values as Python values (:func:`~panel_deploy.contract.parse_values`)."""
+    return contract.parse_values({kv.key: kv.value for kv in status.values})
 
 
 def diagnostics(t: float, *statuses) -> DiagnosticArray:
@@ -245,4 +244,4 @@ def diagnostics(t: float, *statuses) -> DiagnosticArray:
 def event_status(name: str, event) -> DiagnosticStatus:
     """One collision event's status named ``name``/event (the monitor's full
     name), with the fields recordings carry (``event_fields``)."""
-    return status(f"{name}/event", ERROR, *event_fields(event))
+    return status(name + contract.EVENT_SUFFIX, ERROR, *event_fields(event))

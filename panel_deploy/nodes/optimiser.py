@@ -13,15 +13,14 @@ from __future__ import annotations
 
 import threading
 
-from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.srv import SetParameters
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.parameter import Parameter
-from std_msgs.msg import String
 
+from .. import contract
 from ..build import build_model
 from ..errors import PanelDeployError, SceneError, shown
-from ..live import optimisation_scene
+from ..scene_text import optimisation_scene
 from ..optimise import optimise
 from ..optimise.io import dump_result, result_to_dict
 from ..optimise.parallel import Cancelled
@@ -46,10 +45,10 @@ class OptimiserNode(runtime.WorkerNode):
     def __init__(self, **kwargs):
         super().__init__("optimiser", **kwargs)
         runtime.declare(self, PARAMETERS, self._check)
-        self.progress = self.create_publisher(DiagnosticArray, "~/progress", messages.EVENTS)
-        self.result_pub = self.create_publisher(String, "~/result", messages.LATCHED)
-        runtime.trigger_service(self, "~/optimise", self._optimise)
-        runtime.trigger_service(self, "~/cancel", self._cancel)
+        self.progress = runtime.publisher(self, contract.OPTIMISER_PROGRESS)
+        self.result_pub = runtime.publisher(self, contract.OPTIMISER_RESULT)
+        runtime.trigger_service(self, contract.OPTIMISE, self._optimise)
+        runtime.trigger_service(self, contract.CANCEL, self._cancel)
         self._client_group = MutuallyExclusiveCallbackGroup()
         self._targets = {}  # set_parameters clients by service name
         self._cancel_event = threading.Event()

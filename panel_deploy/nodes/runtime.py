@@ -21,11 +21,11 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
-from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
+from .. import contract
 from ..errors import PanelDeployError, SceneError, shown
-from ..live import scene_from_yaml
+from ..scene_text import scene_from_yaml
 from . import messages
 
 
@@ -118,10 +118,24 @@ def _plain(value):
     return value if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") else tuple(value)
 
 
-def trigger_service(node, name, callback):
-    """A ``std_srvs/Trigger`` service whose callback cannot leave a caller
-    without an answer: an unexpected error becomes ``success=False`` with
-    its message, and is logged."""
+def publisher(node, topic: contract.Topic):
+    """``node``'s publisher of a contract topic, with the contract's type and QoS."""
+    return node.create_publisher(messages.message_class(topic.type), topic.name,
+                                 messages.qos(topic.qos))
+
+
+def subscription(node, topic: contract.Topic, callback, **kwargs):
+    """``node``'s subscription to a contract topic, with the contract's type and QoS."""
+    return node.create_subscription(messages.message_class(topic.type), topic.name, callback,
+                                    messages.qos(topic.qos), **kwargs)
+
+
+def trigger_service(node, service: contract.Service, callback):
+    """``node``'s ``std_srvs/Trigger`` service of the contract (``~/`` + its name),
+    whose callback cannot leave a caller without an answer: an unexpected
+    error becomes ``success=False`` with its message, and is logged."""
+    name = f"~/{service.name}"
+
     def guarded(request, response):
         try:
             return callback(request, response)
@@ -156,7 +170,7 @@ class WorkerNode(Node):
         super().__init__(name, **kwargs)
         self.scene = None  # the last valid scene received
         self._worker = None
-        self.create_subscription(String, "panel_deploy/model", self._on_model, messages.LATCHED)
+        subscription(self, contract.MODEL, self._on_model)
 
     def _on_model(self, msg):
         try:
@@ -174,7 +188,7 @@ class WorkerNode(Node):
             response.success, response.message = False, f"{job} is running; {stop} it first"
         elif self.scene is None:
             response.success, response.message = False, (
-                "no model yet on " + self.resolve_topic_name("panel_deploy/model"))
+                "no model yet on " + self.resolve_topic_name(contract.MODEL.name))
         else:
             return False
         return True

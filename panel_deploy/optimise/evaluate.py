@@ -15,7 +15,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..dynamics.report import FLAT_TOLERANCE, hinge_angles
+from ..dynamics.report import hinge_angles
+from ..model import FLAT_TOLERANCE
 from ..errors import OptimisationError
 
 #: Approach speed (m/s) charged to a run whose simulation failed: faster than

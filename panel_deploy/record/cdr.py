@@ -22,8 +22,10 @@ import struct
 
 import numpy as np
 
-from ..export.urdf import WORLD, link_origin
-from .messages import PANEL_COLOUR, nanoseconds, quaternions
+from ..export.urdf import link_origin
+from ..contract import PANEL_COLOUR, WORLD
+from ..frames import quaternions
+from .messages import nanoseconds
 
 ENCAPSULATION = b"\x00\x01\x00\x00"
 
@@ -187,7 +189,7 @@ class SampleEncoder:
 
     def encode(self, samples) -> list:
         """``(clock, joint_state, panels, tf)`` bytes of every sample, a
-        :class:`~panel_deploy.live.Sample` (or any object with its fields).
+        :class:`~panel_deploy.dynamics.deployment.Sample` (or any object with its fields).
 
         ``theta``, ``omega``, ``torque``: every joint in ``names`` order (rad,
         rad/s, N m); ``rotation`` (nb, 3, 3) and ``position`` (nb, 3, m): the

@@ -10,49 +10,21 @@ ROS 2 Jazzy type store (``tf2_msgs`` included, which is not pip-installable);
 
 from __future__ import annotations
 
-import math
 import struct
 
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
-from ..export.urdf import WORLD, link_poses
+from .. import contract
+from ..contract import (CLOCK, DIAGNOSTIC_ARRAY, ERROR, JOINT_STATE, MARKER_ARRAY,  # noqa: F401
+                        HIT_COLOUR, OK, PANEL_COLOUR, STRING, TF_MESSAGE, WARN, WORLD, event_fields)
+from ..frames import ground_transform, quaternions, tree_transforms
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 _T = TYPESTORE.types
 
-STRING = "std_msgs/msg/String"
-JOINT_STATE = "sensor_msgs/msg/JointState"
-MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
-DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
-CLOCK = "rosgraph_msgs/msg/Clock"
-TF_MESSAGE = "tf2_msgs/msg/TFMessage"
-
-#: QoS the node suite offers: latched (transient local, depth 1), the joint
-#: state stream (depth 5000) and everything else (depth 100); all reliable.
-LATCHED, STREAM, EVENTS = ("transient_local", 1), ("volatile", 5000), ("volatile", 100)
-
-#: Every topic a recording carries: type and the QoS (durability, depth) its publisher offers.
-TOPICS = {
-    "/robot_description": (STRING, LATCHED),
-    "/panel_deploy/model": (STRING, LATCHED),
-    "/joint_states": (JOINT_STATE, STREAM),
-    "/panel_deploy/panels": (MARKER_ARRAY, EVENTS),
-    "/diagnostics": (DIAGNOSTIC_ARRAY, EVENTS),
-    "/panel_deploy/collision_events": (DIAGNOSTIC_ARRAY, EVENTS),
-    "/clock": (CLOCK, EVENTS),
-    "/tf": (TF_MESSAGE, EVENTS),
-    "/tf_static": (TF_MESSAGE, LATCHED),
-}
-
-OK, WARN, ERROR = 0, 1, 2
-#: Status names of the node suite's ``dynamics`` and ``collision_monitor``, as the
-#: nodes name theirs (their full names) in the root namespace.
-DYNAMICS_STATUS = "/dynamics"
-MONITOR_STATUS = "/collision_monitor"
-EVENT_STATUS = MONITOR_STATUS + "/event"
-PANEL_COLOUR = (0.25, 0.45, 0.85, 1.0)
-
+#: The recorded topics, by resolved name in the root namespace: (type, QoS).
+TOPICS = {contract.resolve(t.name): (t.type, t.qos) for t in contract.TOPICS}
 
 def serialize(message) -> bytes:
     """CDR bytes (little endian, with the encapsulation header) of a rosbags message."""
@@ -144,29 +116,6 @@ def joint_state(names, t: float, theta, omega, torque):
                            effort=np.asarray(torque, dtype=np.float64))
 
 
-def quaternions(R) -> np.ndarray:
-    """Unit quaternions (x, y, z, w) of rotation matrices ``R`` (k, 3, 3), w >= 0.
-
-    Shepperd's method: each quaternion is computed from its largest
-    component, so there is no division by a small number.
-    """
-    R = np.asarray(R, dtype=float)
-    m00, m11, m22 = R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]
-    # 4 x^2, 4 y^2, 4 z^2, 4 w^2
-    d = np.stack([1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22,
-                  1 + m00 + m11 + m22], axis=1)
-    big = np.argmax(d, axis=1)
-    s = 2 * np.sqrt(d[np.arange(len(R)), big])  # 4 times the largest component
-    yz, xz, xy = R[:, 1, 2] + R[:, 2, 1], R[:, 0, 2] + R[:, 2, 0], R[:, 0, 1] + R[:, 1, 0]
-    wx, wy, wz = R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]
-    quarter = s * s / 4
-    # Row j: 4 * the largest component times (x, y, z, w), if component j is the largest.
-    candidates = np.array([[quarter, xy, xz, wx], [xy, quarter, yz, wy],
-                           [xz, yz, quarter, wz], [wx, wy, wz, quarter]])  # (4, 4, k)
-    q = candidates[big, :, np.arange(len(R))] / s[:, None]
-    return q * np.where(q[:, 3:] < 0, -1.0, 1.0)
-
-
 def _quaternions(R):
     """``geometry_msgs/Quaternion`` of every rotation matrix in ``R`` (k, 3, 3)."""
     q = _T["geometry_msgs/msg/Quaternion"]
@@ -185,13 +134,14 @@ _NO_MESH = _T["visualization_msgs/msg/MeshFile"](filename="", data=np.zeros(0, d
 _FOREVER = _T["builtin_interfaces/msg/Duration"](sec=0, nanosec=0)
 
 
-def _marker(t, ns, index, body, q, p, colour):
+def _marker(t, ns, index, size, q, p, colour, text="", kind=1):
+    """A Marker in ``world``: ``kind`` 1 CUBE, 2 SPHERE; action ADD."""
     return _T["visualization_msgs/msg/Marker"](
-        header=_header(t, WORLD), ns=ns, id=int(index), type=1, action=0,  # CUBE, ADD
+        header=_header(t, WORLD), ns=ns, id=int(index), type=kind, action=0,
         pose=_T["geometry_msgs/msg/Pose"](position=_vector(p, "Point"), orientation=q),
-        scale=_vector(body.size), color=_T["std_msgs/msg/ColorRGBA"](*map(float, colour)),
+        scale=_vector(size), color=_T["std_msgs/msg/ColorRGBA"](*map(float, colour)),
         lifetime=_FOREVER, frame_locked=False, points=[], colors=[], texture_resource="",
-        texture=_NO_IMAGE, uv_coordinates=[], text=body.name, mesh_resource="", mesh_file=_NO_MESH,
+        texture=_NO_IMAGE, uv_coordinates=[], text=text, mesh_resource="", mesh_file=_NO_MESH,
         mesh_use_embedded_materials=False)
 
 
@@ -199,39 +149,26 @@ def panel_markers(model, rotation, position, t: float):
     """Every panel as a CUBE of its true size (thickness included), frame ``world``;
     ``rotation`` (nb, 3, 3) and ``position`` (nb, 3, m) are the body (centroid) poses."""
     return _T[MARKER_ARRAY](markers=[
-        _marker(t, "panels", b, body, q, position[b], PANEL_COLOUR)
+        _marker(t, "panels", b, body.size, q, position[b], PANEL_COLOUR, body.name)
         for b, (body, q) in enumerate(zip(model.bodies, _quaternions(rotation)))])
+
+
+def collision_markers(model, event, rotation, position):
+    """The colliding pair of ``event`` in red at the instant of the event, and
+    its contact point (a yellow 10 mm sphere), as the collision monitor sends them."""
+    q = _quaternions(rotation)
+    unit = _T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
+    return _T[MARKER_ARRAY](markers=[
+        *(_marker(event.t, "collision", b, model.bodies[b].size, q[b], position[b], HIT_COLOUR,
+                  model.bodies[b].name) for b in event.bodies),
+        _marker(event.t, "collision_point", 0, (0.01, 0.01, 0.01), unit, event.point,
+                (1.0, 1.0, 0.0, 1.0), kind=2)])
 
 
 def _transform(t, parent, child, q, p):
     return _T["geometry_msgs/msg/TransformStamped"](
         header=_header(t, parent), child_frame_id=child,
         transform=_T["geometry_msgs/msg/Transform"](translation=_vector(p), rotation=q))
-
-
-def tree_transforms(model, rotation, position):
-    """Every tree joint's child link in its parent link's frame, as
-    robot_state_publisher would broadcast them (frames = URDF link names).
-
-    ``rotation`` (nb, 3, 3) and ``position`` (nb, 3, m) are the body (centroid)
-    poses in ``world``. Returns ``(parent, child, R, p)``: body indices (k,),
-    rotations (k, 3, 3) and translations (k, 3, m), in ``model.joints`` order.
-    The recordings' ``/tf`` and the dynamics node's are made of these.
-    """
-    R, p = link_poses(model, rotation, position)
-    pairs = [(model.hinges[h].body_a, model.hinges[h].body_b) for h in model.joints]
-    a, b = np.array(pairs).T
-    R_rel = np.einsum("kji,kjl->kil", R[a], R[b])           # R_a^T R_b
-    p_rel = np.einsum("kji,kj->ki", R[a], p[b] - p[a])      # R_a^T (p_b - p_a)
-    return a, b, R_rel, p_rel
-
-
-def ground_transform(model):
-    """``world`` -> the ground body's link (the URDF's fixed joint): ``(R, p)``."""
-    g = model.ground
-    R, p = link_poses(model, np.eye(3)[None].repeat(model.n_bodies, 0),
-                      np.array([b.flat_position for b in model.bodies]))
-    return R[g], p[g]
 
 
 def tf_message(model, rotation, position, t: float):
@@ -249,15 +186,6 @@ def tf_static(model, t: float = 0.0):
                                                  _quaternions(R[None])[0], p)])
 
 
-def status_value(v) -> str:
-    """A diagnostic key-value's text: floats by ``repr``, sequences comma-separated."""
-    if isinstance(v, float):
-        return "nan" if math.isnan(v) else repr(v)
-    if isinstance(v, (list, tuple)):
-        return ",".join(map(str, v))
-    return str(v)
-
-
 def status(name: str, level: int, message: str, values: dict | None = None,
            hardware_id: str = "panel_array"):
     """A ``diagnostic_msgs/DiagnosticStatus``; ``values`` become key-values
@@ -266,7 +194,7 @@ def status(name: str, level: int, message: str, values: dict | None = None,
     return _T["diagnostic_msgs/msg/DiagnosticStatus"](
         level=level, name=name, message=message,
         hardware_id=hardware_id,
-        values=[kv(key=str(k), value="" if v is None else status_value(v))
+        values=[kv(key=str(k), value=contract.status_value(v))
                 for k, v in (values or {}).items()])
 
 
@@ -274,27 +202,14 @@ def diagnostics(t: float, *statuses):
     return _T[DIAGNOSTIC_ARRAY](header=_header(t), status=list(statuses))
 
 
-def event_fields(event) -> tuple:
-    """Message and key-values of one collision event's status: pair, time (s),
-    approach speed of Eq. (7) (m/s), distance (m); the nodes send the same."""
-    speed = event.approach_speed if math.isfinite(event.approach_speed) else event.normal_speed
-    return (f"collision between {event.names[0]} and {event.names[1]} at t = {event.t:.4f} s",
-            {"pair": list(event.names), "t": event.t, "approach_speed": speed,
-             "normal_speed": event.normal_speed, "distance": event.distance,
-             "contact_time": event.contact_time, "sample": event.sample,
-             "point": [float(x) for x in event.point]})
+def event_status(monitor: str, event):
+    """One collision event's DiagnosticStatus (:func:`~panel_deploy.contract.event_fields`),
+    named after the monitor's status name ``monitor``."""
+    return status(monitor + contract.EVENT_SUFFIX, ERROR, *event_fields(event))
 
 
-def event_status(event):
-    """One collision event's DiagnosticStatus (:func:`event_fields`)."""
-    return status(EVENT_STATUS, ERROR, *event_fields(event))
-
-
-def outcome_status(summary: dict):
-    """The ``dynamics`` node's end-of-run status from a deployment summary
-    (:func:`panel_deploy.summary.deployment_summary`)."""
-    s = summary
-    level = OK if s["success"] and s["time_to_flat"] is not None else (WARN if s["success"] else ERROR)
-    values = {k: s[k] for k in ("success", "status", "message", "time_to_flat", "t_end",
-                                "energy_balance_error", "max_constraint_gap", "wall_time", "nsteps")}
-    return status(DYNAMICS_STATUS, level, s["message"], values)
+def outcome_status(name: str, summary: dict, samples: int):
+    """The ``dynamics`` node's end-of-run status (named ``name``) from a deployment
+    summary (:func:`panel_deploy.summary.deployment_summary`)."""
+    return status(name, contract.outcome_level(summary), summary["message"],
+                  contract.outcome_values(summary, samples))

@@ -117,7 +117,7 @@ class Recording:
         """
         if not self.count("/panel_deploy/model"):
             return None
-        from ..live import scene_from_yaml
+        from ..scene_text import scene_from_yaml
 
         text = self.messages("/panel_deploy/model", messages.STRING)[-1][1].data
         try:
@@ -348,7 +348,7 @@ def hinge_track(states: JointStates, model, path, scene_name: str = "") -> Hinge
     TrajectoryError
         A joint that is no hinge of the model, or a tree hinge missing.
     """
-    from ..dynamics.report import hinge_order
+    from ..model import hinge_order
 
     known = [model.hinges[h].name for h in hinge_order(model)]
     tree = known[:model.n_coords]

@@ -39,28 +39,33 @@ from pathlib import Path
 
 import yaml
 
-from .. import __version__
-from ..errors import TrajectoryError
+from .. import __version__, contract
+from ..build import build_model
+from ..errors import PanelDeployError, TrajectoryError
+from ..kinematics import forward_kinematics
+from ..scene_text import scene_from_yaml
 from ..validate import in_place, temporary_beside
 from . import messages
 from .mcap_file import McapFile
+
 
 #: rmw's "infinite" duration (``RMW_DURATION_INFINITE``) as rosbag2 stores it.
 _INFINITE = {"sec": 9223372036, "nsec": 854775807}
 
 
-def qos_profiles(durability: str, depth: int) -> list:
-    """The ``offered_qos_profiles`` of one publisher (rosbag2 metadata version 9):
-    reliable, keep last ``depth``, ``durability`` "volatile" or "transient_local"."""
-    return [{"history": "keep_last", "depth": depth, "reliability": "reliable",
-             "durability": durability, "deadline": dict(_INFINITE), "lifespan": dict(_INFINITE),
-             "liveliness": "automatic", "liveliness_lease_duration": dict(_INFINITE),
+def qos_profiles(qos: contract.QoS) -> list:
+    """The ``offered_qos_profiles`` of one publisher (rosbag2 metadata version 9)."""
+    return [{"history": "keep_last", "depth": qos.depth, "reliability": qos.reliability,
+             "durability": qos.durability, "deadline": dict(_INFINITE),
+             "lifespan": dict(_INFINITE), "liveliness": "automatic",
+             "liveliness_lease_duration": dict(_INFINITE),
              "avoid_ros_namespace_conventions": False}]
 
 
 def _qos_for(topic: str) -> list:
-    durability, depth = messages.TOPICS.get(topic, (None, messages.EVENTS))[1]
-    return qos_profiles(durability, depth)
+    """The contract's QoS of a resolved topic name (in any namespace); EVENTS for others."""
+    found = contract.topic_of(topic)
+    return qos_profiles(found[0].qos if found else contract.EVENTS)
 
 
 #: libyaml's dumper when PyYAML has it (ten times faster), else the Python one.
@@ -254,3 +259,184 @@ def run_metadata() -> dict:
             "wall_time": datetime.datetime.now(datetime.timezone.utc).isoformat(),
             "python": sys.version.split()[0], "mcap": version("mcap"),
             "rosbags": version("rosbags"), "arguments": shlex.join(sys.argv[1:])}
+
+
+def _relative(source) -> str:
+    """A scene file relative to the working directory when it lies below it."""
+    if not source:
+        return ""
+    path = Path(source).resolve()
+    return str(path.relative_to(Path.cwd())) if path.is_relative_to(Path.cwd()) else str(source)
+
+
+def model_record(model) -> dict:
+    """The ``model`` metadata record: k and c of one spring per hinge (model
+    order), springs per hinge, joint-stop contact, closure and gravity."""
+    c = model.closure
+    return {"hinges": [h.name for h in model.hinges],
+            "stiffness": [float(h.k) for h in model.hinges],           # N m/rad, one spring
+            "damping": [float(h.c) for h in model.hinges],             # N m s/rad, one spring
+            "springs": [int(h.springs) for h in model.hinges],
+            "k_s": float(model.k_s), "c_s": float(model.c_s),
+            "closure": c.method, "k_M": c.k_M, "c_M": c.c_M, "k_N": c.k_N, "c_N": c.c_N,
+            "gravity": [float(g) for g in model.gravity]}
+
+
+def integrator_record(scene) -> dict:
+    """The ``integrator`` metadata record of a scene's simulation and collision settings."""
+    s = scene.simulation
+    return {"method": s.method, "rtol": s.rtol, "atol": s.atol, "t_end": s.t_end,
+            "samples": s.samples, "rate_hz": (s.samples - 1) / s.t_end,
+            "flat_tolerance": s.flat_tolerance, "collision_tolerance": scene.collision.tolerance}
+
+
+def outcome_record(summary: dict) -> dict:
+    """The ``outcome`` metadata record of a :func:`deployment_summary` with its
+    collision part: success, time to flat (s), first collision (t s, pair,
+    approach speed v m/s) and the smallest distance d (m)."""
+    c = summary["collision"]
+    first = c["first_collision"]
+    return {"success": bool(summary["success"]), "message": summary["message"],
+            "t_end": summary["t_end"], "time_to_flat": summary["time_to_flat"],
+            "collided": c["collided"],
+            "first_collision_t": None if first is None else float(first["t"]),
+            "first_collision_pair": None if first is None else list(first["pair"]),
+            "approach_speed": float(c["v"]) if first is not None else None,
+            "d": None if c["d"] is None else float(c["d"]), "wall_time": summary["wall_time"]}
+
+
+def _stamp_ns(message) -> int | None:
+    """The simulated-time stamp of a contract message, ns (None without one)."""
+    if hasattr(message, "header"):
+        stamp = message.header.stamp
+    elif hasattr(message, "clock"):
+        stamp = message.clock
+    elif getattr(message, "markers", None):
+        stamp = message.markers[0].header.stamp
+    elif getattr(message, "transforms", None):
+        stamp = message.transforms[0].header.stamp
+    else:
+        return None
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+class DeploymentWriter:
+    """The recording of one deployment graph, the one path of every recording:
+    ``simulate --record`` hands it what it computes, the recorder node of
+    ``run --record`` what it receives; both make the same file.
+
+    Every topic of :mod:`panel_deploy.contract` gets a channel (resolved in
+    ``namespace``, so a namespaced graph keeps its names), even one left
+    empty. The log time of a stamped topic's message is its stamp (simulated
+    time); any other message is logged at the latest stamp written before it
+    (0 before the deployment starts). :meth:`deployed` records what runs:
+    the ``scene`` (the effective scene: k and c per hinge and every override),
+    ``model`` and ``integrator`` metadata and ``/tf_static``; :meth:`close`
+    the ``outcome`` record and the file's summary.
+
+    Raises
+    ------
+    TrajectoryError
+        The file cannot be created or written.
+    """
+
+    def __init__(self, path, namespace: str = ""):
+        self.file = Recorder(path)
+        self.namespace = namespace
+        self.now = 0  # ns: the latest stamp written
+        self.model = None
+        self.file.metadata("run", {**run_metadata(), "namespace": namespace})
+        for topic in contract.TOPICS:
+            self.file.channel(self.name(topic), topic.type)
+
+    @property
+    def closed(self) -> bool:
+        return self.file.closed
+
+    def name(self, topic: contract.Topic) -> str:
+        """``topic`` resolved in this recording's namespace."""
+        return contract.resolve(topic.name, self.namespace)
+
+    def write(self, topic: contract.Topic, message, stamp: int | None = None) -> None:
+        """Record ``message`` (a rosbags message or its CDR bytes) on ``topic``.
+
+        ``stamp`` (ns) saves decoding a stamped message's bytes to find its
+        stamp; rclpy's stray padding is trimmed from bytes (see
+        :func:`.messages.trim`).
+        """
+        if isinstance(message, (bytes, bytearray, memoryview)):
+            data = messages.trim(message, topic.type)
+            if topic.stamped and stamp is None:
+                stamp = _stamp_ns(messages.deserialize(data, topic.type))
+        else:
+            data = messages.serialize(message)
+            if topic.stamped and stamp is None:
+                stamp = _stamp_ns(message)
+        if topic.stamped and stamp is not None:
+            self.now = max(self.now, stamp)
+        self.file.write(self.name(topic), topic.type, data,
+                        stamp if topic.stamped and stamp is not None else self.now)
+
+    def deployed(self, scene, model, text: str, source: str = "") -> None:
+        """What the deployment runs: its scene text (``text``, the effective
+        scene) on ``dynamics/scene`` and as the ``scene`` metadata, ``model``
+        and ``integrator`` metadata, and ``/tf_static``."""
+        self.model = model
+        self.file.metadata("scene", {"name": scene.name or "", "source": _relative(source),
+                                     "yaml": text})
+        self.file.metadata("model", model_record(model))
+        self.file.metadata("integrator", integrator_record(scene))
+        self.write(contract.DEPLOYED_SCENE, messages.string(text))
+        self.write(contract.TF_STATIC, messages.tf_static(model))
+
+    def receive(self, topic: contract.Topic, data) -> None:
+        """Record CDR bytes received on ``topic`` from a live graph.
+
+        The deployed scene (``dynamics/scene``) is recorded by :meth:`deployed`
+        (a scene that does not load is recorded as it came, with a
+        PanelDeployError); each joint state of the deployed model's hinges
+        adds its ``/tf``, as robot_state_publisher would send it.
+        """
+        if topic is contract.DEPLOYED_SCENE:
+            text = messages.deserialize(data, topic.type).data
+            try:
+                scene = scene_from_yaml(text, source=self.name(topic))
+                model = build_model(scene)
+            except PanelDeployError:
+                self.write(topic, data)
+                raise
+            self.deployed(scene, model, text, scene.source)
+        elif topic is contract.JOINT_STATES:
+            message = messages.deserialize(data, topic.type)
+            stamp = _stamp_ns(message)
+            self.write(topic, data, stamp)
+            self._tf(message, stamp)
+        else:
+            self.write(topic, data)
+
+    def _tf(self, joint_state, stamp: int) -> None:
+        model = self.model
+        if model is None:
+            return
+        index = {name: i for i, name in enumerate(joint_state.name)}
+        try:
+            theta = [joint_state.position[index[model.hinges[h].name]] for h in model.joints]
+        except KeyError:
+            return  # not this model's joint states: recorded, but no /tf for them
+        R, p = forward_kinematics(model, theta)[:2]
+        self.write(contract.TF, messages.tf_message(model, R, p, stamp * 1e-9), stamp)
+
+    def close(self, summary: dict | None = None) -> None:
+        """Write the ``outcome`` record of a deployment summary (if given) and
+        the file's summary, and rename the file into place."""
+        if self.file.closed:
+            return
+        if summary is not None:
+            self.file.metadata("outcome", outcome_record(summary))
+        self.file.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

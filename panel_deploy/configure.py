@@ -1,37 +1,20 @@
-"""A deployment run live: what the ROS nodes and ``panel-deploy run`` share, without ROS.
-
-The dynamics node's parameters as a validated value (:class:`DynamicsParameters`),
-the scene and model they make (:func:`configure`), the scene as the text a
-``/panel_deploy/model`` message carries (:func:`scene_yaml`, :func:`scene_from_yaml`),
-a sampled run handed out sample by sample while it is computed
-(:func:`stream_samples`), and the wall-clock pacing of simulated time
-(:class:`Pacer`).
-"""
+"""What a deployment runs: the dynamics node's parameters as a validated value
+(:class:`DynamicsParameters`), the scene and model they make (:func:`configure`),
+the one rule for k and c (:func:`apply_stiffness`), and what the ``array_model``
+node publishes (:func:`load_array`)."""
 
 from __future__ import annotations
 
 import math
-import threading
-import time
-from dataclasses import dataclass, replace
-from typing import NamedTuple
+from dataclasses import dataclass
 
 import numpy as np
-import yaml
 
 from .build import build_model
-from .dynamics import simulate_segments
-from .dynamics.report import hinge_states
-from .dynamics.pack import pack
-from .dynamics.result import SimulationResult, concatenate
 from .errors import SceneError, shown
 from .model import Model
 from .scene import INTEGRATORS, Scene, SimulationSection, apply_overrides, scene_from_dict
-from .validate import load_yaml, yaml_problem
-
-#: Samples per integrator block: 50 ms of simulated time at 200 Hz, small
-#: enough that the first message leaves within milliseconds of the request.
-BLOCK_SAMPLES = 10
+from .scene_text import scene_from_yaml, scene_yaml, yaml_value
 
 
 @dataclass(frozen=True)
@@ -146,7 +129,7 @@ def configure(scene: Scene, params: DynamicsParameters) -> tuple:
     if params.rtol:
         keys.update({"simulation.rtol": params.rtol,
                      "simulation.atol": sim.atol * params.rtol / sim.rtol})
-    data = apply_overrides(scene.data, [f"{k}={_yaml_value(v)}" for k, v in keys.items() if v])
+    data = apply_overrides(scene.data, [f"{k}={yaml_value(v)}" for k, v in keys.items() if v])
     try:  # the limits and cross-key rules of a scene file, as the command line has them
         scene = scene_from_dict(data, source=scene.source)
     except SceneError as e:
@@ -161,123 +144,6 @@ def configure(scene: Scene, params: DynamicsParameters) -> tuple:
     model = build_model(scene)
     ratio = None if params.damping_ratio < 0 else params.damping_ratio
     return scene, apply_stiffness(model, params.stiffness, ratio)
-
-
-def scene_yaml(scene: Scene, model: Model | None = None) -> str:
-    """The scene as YAML text, as ``/panel_deploy/model`` and recordings carry it.
-
-    With ``model``, its k per hinge becomes ``hinges.overrides`` and, when
-    every sprung hinge has the same c/k, that ratio ``hinges.damping_ratio``,
-    so that readers rebuild the model's k and c.
-    """
-    data = dict(scene.data)
-    if model is not None:
-        hinges = dict(data.get("hinges") or {})
-        hinges["overrides"] = {h.name: float(h.k) for h in model.hinges}
-        ratios = {h.c / h.k for h in model.hinges if h.k > 0}
-        if ratios and max(ratios) - min(ratios) <= 1e-12 * max(ratios):
-            hinges["damping_ratio"] = float(min(ratios))
-        data["hinges"] = hinges
-    return yaml.safe_dump(data, sort_keys=False)
-
-
-def scene_from_yaml(text: str, source: str = "/panel_deploy/model") -> Scene:
-    """Parse and validate a scene sent as YAML text.
-
-    Raises
-    ------
-    SceneError
-        Text that is not YAML, or not a valid scene.
-    """
-    try:
-        data = load_yaml(text)
-    except yaml.YAMLError as e:
-        raise SceneError(source, f"not valid YAML ({yaml_problem(e)})") from None
-    return scene_from_dict(data, source=source)
-
-
-class Sample(NamedTuple):
-    """One instant of a deployment, every hinge in :func:`hinge_states` order."""
-
-    t: float              #: s
-    theta: np.ndarray     #: rad
-    omega: np.ndarray     #: rad/s
-    torque: np.ndarray    #: N m
-    rotation: np.ndarray  #: (nb, 3, 3) body orientations in the ground frame
-    position: np.ndarray  #: (nb, 3) body centroids, m
-
-
-class Deployment:
-    """A deployment computed block by block and handed out sample by sample.
-
-    Iterating yields :class:`Sample` as soon as its block is integrated; the
-    blocks continue one integration, so the samples are those of
-    :func:`~panel_deploy.dynamics.simulate` with the same settings. After the
-    iteration, :attr:`result` is the whole run (what was computed, when
-    stopped early). :meth:`stop` (from any thread) ends it at the next block.
-    """
-
-    def __init__(self, model: Model, settings, block: int = BLOCK_SAMPLES):
-        self.model = model
-        self.settings = settings
-        self.block = block
-        self.names = None
-        self.blocks: list = []
-        self.stopped = False
-        #: Set by :meth:`stop`; wait on it to sleep no longer than the run lasts.
-        self.stopping = threading.Event()
-
-    def stop(self) -> None:
-        self.stopping.set()
-
-    def __iter__(self):
-        segments = simulate_segments(self.model, self.settings, segment_samples=self.block)
-        packed = pack(self.model)
-        try:
-            for block in segments:
-                self.blocks.append(block)
-                names, theta, omega, torque = hinge_states(self.model, block, packed)
-                self.names = names
-                for j in range(len(block.t)):
-                    yield Sample(float(block.t[j]), theta[j], omega[j], torque[j],
-                                 block.rotation[j], block.position[j])
-                if self.stopping.is_set():
-                    self.stopped = True
-                    return
-        finally:
-            segments.close()
-
-    @property
-    def result(self) -> SimulationResult | None:
-        """The samples computed so far as one result (None before the first block)."""
-        if not self.blocks:
-            return None
-        result = concatenate(self.blocks)
-        if self.stopped and result.success:
-            result = replace(result, success=False, status=1,
-                             message=f"stopped at t = {result.t[-1]:.6g} s")
-        return result
-
-
-class Pacer:
-    """Wall-clock pacing of simulated time: ``wait(t)`` returns when ``t`` (s,
-    simulated) is due at ``real_time_factor`` simulated seconds per wall
-    second, counting from the first call; 0 never waits."""
-
-    def __init__(self, real_time_factor: float, stop: threading.Event | None = None):
-        self.factor = real_time_factor
-        self._stop = stop or threading.Event()
-        self._origin = None
-
-    def wait(self, t: float) -> None:
-        if self.factor <= 0:
-            return
-        now = time.monotonic()
-        if self._origin is None:
-            self._origin = now - t / self.factor
-        delay = self._origin + t / self.factor - now
-        if delay > 0:
-            self._stop.wait(delay)
 
 
 def load_array(scene: str, stiffness_file: str = "") -> tuple:
@@ -305,48 +171,3 @@ def load_array(scene: str, stiffness_file: str = "") -> tuple:
     model = model.with_stiffness(k)
     text = scene_yaml(parsed, model)
     return scene_from_yaml(text, source=parsed.source), model, text
-
-
-def optimisation_scene(scene: Scene, **overrides) -> Scene:
-    """``scene`` with ``optimisation`` keys overridden (None or empty keeps the
-    scene's value), validated as a scene file's would be.
-
-    Raises
-    ------
-    SceneError
-        Naming ``optimisation.<key>`` and what was wrong.
-    """
-    from .scene import apply_overrides
-
-    given = {k: v for k, v in overrides.items() if v is not None and v != () and v != ""}
-    data = apply_overrides(scene.data, [f"optimisation.{k}={_yaml_value(v)}"
-                                        for k, v in given.items()])
-    return scene_from_dict(data, source=scene.source)
-
-
-def _yaml_value(v) -> str:
-    return yaml.safe_dump(list(v) if isinstance(v, tuple) else v, default_flow_style=True).strip()
-
-
-class Throttle:
-    """At most one report per ``period`` s (wall clock) of each kind: the first
-    at once, the others counted and told with the next one, so a stream of
-    bad messages gives a line a second instead of a line a message.
-
-    ``throttle(kind)`` returns None to stay quiet, else how many reports of
-    that kind were held back since the last one.
-    """
-
-    def __init__(self, period: float = 1.0, clock=time.monotonic):
-        self.period = period
-        self._clock = clock
-        self._last: dict = {}
-        self._held: dict = {}
-
-    def __call__(self, kind: str) -> int | None:
-        now = self._clock()
-        if now - self._last.get(kind, -math.inf) < self.period:
-            self._held[kind] = self._held.get(kind, 0) + 1
-            return None
-        self._last[kind] = now
-        return self._held.pop(kind, 0)

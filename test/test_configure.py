@@ -1,4 +1,4 @@
-"""panel_deploy.live: the ROS-free core of the nodes, checked against the batch core."""
+"""configure, dynamics.deployment, scene_text and timing: the ROS-free core of the nodes, checked against the batch core."""
 
 
 import time
@@ -11,8 +11,10 @@ from panel_deploy.build import build_model
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_states
 from panel_deploy.errors import SceneError
-from panel_deploy.live import (Deployment, DynamicsParameters, Pacer, apply_stiffness,
-                               configure, optimisation_scene, scene_from_yaml, scene_yaml)
+from panel_deploy.dynamics.deployment import Deployment
+from panel_deploy.configure import DynamicsParameters, apply_stiffness, configure
+from panel_deploy.timing import Pacer
+from panel_deploy.scene_text import optimisation_scene, scene_from_yaml, scene_yaml
 from panel_deploy.scene import load_scene, resolve_scene
 
 

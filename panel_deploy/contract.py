@@ -1,0 +1,255 @@
+"""The ROS contract of panel_deploy, in one place and without rclpy.
+
+Every topic and service the node suite offers, with its type, QoS, publisher
+and stamp convention; the status names on ``/diagnostics``; the fields of a
+collision event, a monitor verdict and a deployment outcome, with the parsers
+that turn their key-value text back into numbers. The nodes create their
+publishers, subscriptions and services from these values, the recorder
+records every topic listed here with the QoS given here, and the readers,
+replay and the tests read them from here (``test_contract`` fails when a
+topic name or a QoS appears anywhere else in the package).
+
+Names: a topic name without a leading ``/`` is relative and resolves in the
+graph's namespace (``joint_states`` is ``/array7/joint_states`` for a graph
+run with ``--namespace array7``); a leading ``/`` marks a global topic, as
+ROS's own ``/diagnostics``, ``/clock``, ``/tf`` and ``/tf_static`` are. A
+recording keeps the resolved (namespaced) names.
+
+Frames: ``world`` is the ground frame (the flat array frame of the ground
+panel); every body's link frame is named after the body (``r1c2+r1c3``). The
+dynamics node's ``frame_prefix`` parameter puts a prefix before every frame.
+
+Times: every stamp of a simulated deployment is simulated time in s since
+release (``/clock`` carries the same). A monitor's verdict is stamped with
+the stream's time of its last sample.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+#: The ground frame's name (URDF root link, /tf_static parent, marker frame).
+WORLD = "world"
+
+STRING = "std_msgs/msg/String"
+JOINT_STATE = "sensor_msgs/msg/JointState"
+MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
+DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
+CLOCK = "rosgraph_msgs/msg/Clock"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+TRIGGER = "std_srvs/srv/Trigger"
+
+
+@dataclass(frozen=True)
+class QoS:
+    """A publisher's quality of service: reliable, keep last ``depth``,
+    ``durability`` "volatile" or "transient_local" (latched)."""
+
+    depth: int
+    durability: str = "volatile"
+    reliability: str = "reliable"
+
+
+#: Latched: a late subscriber still gets the last message.
+LATCHED = QoS(1, "transient_local")
+#: Deep enough for a whole deployment computed faster than real time (2 s at
+#: 1 kHz plus room), so that no subscriber misses a sample.
+STREAM = QoS(5000)
+#: Everything else; /tf as tf2's own (reliable, volatile, 100 deep).
+EVENTS = QoS(100)
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One topic of the node suite.
+
+    Attributes
+    ----------
+    name : str
+        Relative (resolved in the graph's namespace) or global (leading ``/``).
+    type : str
+        ROS 2 type name, e.g. ``sensor_msgs/msg/JointState``.
+    qos : QoS
+        What its publisher offers and its subscribers ask for.
+    publisher : str
+        The node that publishes it.
+    stamped : bool
+        Its messages carry a stamp in simulated (stream) time, which a
+        recording takes as their log time.
+    """
+
+    name: str
+    type: str
+    qos: QoS
+    publisher: str
+    stamped: bool = False
+
+
+ROBOT_DESCRIPTION = Topic("robot_description", STRING, LATCHED, "array_model")
+MODEL = Topic("panel_deploy/model", STRING, LATCHED, "array_model")
+#: The scene of the current deployment exactly as it runs: the model's scene
+#: with every override (dynamics parameters, an optimiser's K and c/k) applied.
+DEPLOYED_SCENE = Topic("dynamics/scene", STRING, LATCHED, "dynamics")
+JOINT_STATES = Topic("joint_states", JOINT_STATE, STREAM, "dynamics", stamped=True)
+PANELS = Topic("panel_deploy/panels", MARKER_ARRAY, EVENTS, "dynamics", stamped=True)
+CLOCK_TOPIC = Topic("/clock", CLOCK, STREAM, "dynamics", stamped=True)
+TF = Topic("/tf", TF_MESSAGE, EVENTS, "dynamics", stamped=True)
+TF_STATIC = Topic("/tf_static", TF_MESSAGE, LATCHED, "dynamics")
+DIAGNOSTICS = Topic("/diagnostics", DIAGNOSTIC_ARRAY, EVENTS, "dynamics, collision_monitor",
+                    stamped=True)
+COLLISION_EVENTS = Topic("panel_deploy/collision_events", DIAGNOSTIC_ARRAY, EVENTS,
+                         "collision_monitor", stamped=True)
+COLLISION_MARKERS = Topic("panel_deploy/collision_markers", MARKER_ARRAY, EVENTS,
+                          "collision_monitor", stamped=True)
+OPTIMISER_PROGRESS = Topic("optimiser/progress", DIAGNOSTIC_ARRAY, EVENTS, "optimiser")
+OPTIMISER_RESULT = Topic("optimiser/result", STRING, LATCHED, "optimiser")
+
+#: Every topic, in the order a recording lists its channels.
+TOPICS = (ROBOT_DESCRIPTION, MODEL, DEPLOYED_SCENE, JOINT_STATES, PANELS, DIAGNOSTICS,
+          COLLISION_EVENTS, COLLISION_MARKERS, OPTIMISER_PROGRESS, OPTIMISER_RESULT, CLOCK_TOPIC,
+          TF, TF_STATIC)
+
+
+@dataclass(frozen=True)
+class Service:
+    """A ``std_srvs/Trigger`` service: ``node``/``name``, relative to the graph's namespace."""
+
+    node: str
+    name: str
+    type: str = TRIGGER
+
+    @property
+    def path(self) -> str:
+        """The service's name relative to the namespace (``dynamics/deploy``)."""
+        return f"{self.node}/{self.name}"
+
+
+RELOAD = Service("array_model", "reload")
+DEPLOY = Service("dynamics", "deploy")
+STOP = Service("dynamics", "stop")
+RESET = Service("collision_monitor", "reset")
+OPTIMISE = Service("optimiser", "optimise")
+CANCEL = Service("optimiser", "cancel")
+SERVICES = (RELOAD, DEPLOY, STOP, RESET, OPTIMISE, CANCEL)
+
+#: Node names of the suite.
+NODES = ("array_model", "dynamics", "collision_monitor", "optimiser")
+
+
+def resolve(name: str, namespace: str = "") -> str:
+    """The absolute name of topic ``name`` in ``namespace`` (``""`` or ``/``: the root)."""
+    if name.startswith("/"):
+        return name
+    ns = namespace.strip("/")
+    return f"/{ns}/{name}" if ns else f"/{name}"
+
+
+def namespace_of(resolved: str, topic: Topic) -> str | None:
+    """The namespace in which ``topic`` resolves to ``resolved`` ("" for the
+    root), or None when it does not."""
+    if topic.name.startswith("/"):
+        return "" if resolved == topic.name else None
+    suffix = "/" + topic.name
+    if not resolved.endswith(suffix):
+        return None
+    return resolved[:-len(suffix)]
+
+
+def topic_of(resolved: str):
+    """``(topic, namespace)`` of a resolved topic name (``/array7/joint_states``),
+    or None for a topic the contract does not list."""
+    for topic in TOPICS:
+        ns = namespace_of(resolved, topic)
+        if ns is not None:
+            return topic, ns
+    return None
+
+
+def status_name(namespace: str, node: str) -> str:
+    """The name of ``node``'s statuses on /diagnostics: its full name
+    (``/array7/dynamics``), so that arrays side by side tell theirs apart."""
+    return resolve(node, namespace)
+
+
+#: A collision event's status is the monitor's name + this.
+EVENT_SUFFIX = "/event"
+OK, WARN, ERROR = 0, 1, 2
+PANEL_COLOUR = (0.25, 0.45, 0.85, 1.0)
+HIT_COLOUR = (0.95, 0.15, 0.1, 1.0)
+
+
+def status_value(v) -> str:
+    """A diagnostic key-value's text: floats by ``repr``, sequences comma-separated,
+    None as the empty string."""
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return "nan" if math.isnan(v) else repr(v)
+    if isinstance(v, (list, tuple)):
+        return ",".join(map(str, v))
+    return str(v)
+
+
+def event_fields(event) -> tuple:
+    """Message and key-values of one collision event's status: pair, time (s),
+    approach speed of Eq. (7) (m/s), distance (m); recordings carry the same."""
+    speed = event.approach_speed if math.isfinite(event.approach_speed) else event.normal_speed
+    return (f"collision between {event.names[0]} and {event.names[1]} at t = {event.t:.4f} s",
+            {"pair": list(event.names), "t": event.t, "approach_speed": speed,
+             "normal_speed": event.normal_speed, "distance": event.distance,
+             "contact_time": event.contact_time, "sample": event.sample,
+             "point": [float(x) for x in event.point]})
+
+
+#: Keys of the dynamics node's outcome status (besides ``summary`` and ``samples``).
+OUTCOME_KEYS = ("success", "status", "message", "time_to_flat", "t_end", "energy_balance_error",
+                "max_constraint_gap", "wall_time", "nsteps")
+
+
+def outcome_level(summary: dict) -> int:
+    """OK when the run reached t_end and flat, WARN when it reached t_end only, else ERROR."""
+    if summary["success"]:
+        return OK if summary["time_to_flat"] is not None else WARN
+    return ERROR
+
+
+def outcome_values(summary: dict, samples: int) -> dict:
+    """The key-values of the dynamics node's outcome status: the scalars of a
+    :func:`~panel_deploy.summary.deployment_summary`, ``samples`` (how many
+    joint states were published, so a client knows when a monitor has
+    checked them all) and the whole summary as JSON."""
+    values = {k: summary[k] for k in OUTCOME_KEYS}
+    values["samples"] = samples
+    values["summary"] = json.dumps(summary)
+    return values
+
+
+def _number(text: str):
+    return None if text in ("", "None") else float(text)
+
+
+def _pair(text: str):
+    return text.split(",") if text else None
+
+
+#: How each key-value of an event, a verdict or an outcome reads back.
+_PARSERS = {"t": float, "approach_speed": float, "normal_speed": _number, "distance": float,
+            "contact_time": _number, "sample": int, "pair": _pair,
+            "point": lambda s: [float(x) for x in s.split(",")] if s else None,
+            "deployment": int, "origin": _number, "samples": int, "d": _number,
+            "d_pair": _pair, "d_time": _number, "distance_now": _number, "refused": int,
+            "gaps": int, "largest_gap": _number, "solved": lambda s: s.split(",") if s else [],
+            "first_collision_pair": _pair, "first_collision_t": _number,
+            "success": lambda s: s == "True", "status": int, "time_to_flat": _number,
+            "t_end": _number, "energy_balance_error": _number, "max_constraint_gap": _number,
+            "wall_time": _number, "nsteps": int, "publish_wall_time": _number,
+            "summary": json.loads, "evaluations": int, "best_f": float,
+            "feasible": lambda s: s == "True", "elapsed": float}
+
+
+def parse_values(values: dict) -> dict:
+    """Key-values of an event, a verdict or an outcome (``{key: text}``) as
+    Python values: numbers, lists, None for an empty value; unknown keys stay text."""
+    return {k: (_PARSERS[k](v) if k in _PARSERS else v) for k, v in values.items()}

@@ -144,17 +144,19 @@ def build_model(scene: Scene, design=None) -> Model:
             by_pair.setdefault((min(ia, ib), max(ia, ib)), []).append(seg)
     names = {hinge_name(sorted(segs)[0]) for segs in by_pair.values()}
     overrides = scene.hinges.overrides or {}
-    for key in overrides:
-        if key not in names:
-            raise SceneError(f"hinges.overrides.{key}",
-                             f"no such hinge (hinges are: {', '.join(sorted(names))})")
+    damping = scene.hinges.damping_overrides or {}
+    for section, keys in (("overrides", overrides), ("damping_overrides", damping)):
+        for key in keys:
+            if key not in names:
+                raise SceneError(f"hinges.{section}.{key}",
+                                 f"no such hinge (hinges are: {', '.join(sorted(names))})")
     hinges = []
     for (ia, ib), segs in sorted(by_pair.items()):
         segs = sorted(segs)
         name = hinge_name(segs[0])
         k = overrides.get(name, scene.hinges.stiffness)
         hinges.append(_hinge(name, ia, ib, bodies[ia].cells, segs, d.stowed,
-                             geom, k, scene.hinges.damping_ratio * k))
+                             geom, k, damping.get(name, scene.hinges.damping_ratio * k)))
 
     cuts = None
     if scene.closure.cut_hinge is not None:

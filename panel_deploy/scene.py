@@ -197,6 +197,15 @@ def hinge_stiffness_map(v, path):
 hinge_stiffness_map.describe = "{hinge name: N m/rad}"
 
 
+def hinge_damping_map(v, path):
+    if not isinstance(v, dict):
+        raise SceneError(path, f"expected a mapping hinge name -> damping, got {shown(v)}")
+    return {str(k): number(0.0, 1e4, why=_WHY_STIFF)(x, f"{path}.{k}") for k, x in v.items()}
+
+
+hinge_damping_map.describe = "{hinge name: N m s/rad}"
+
+
 def groups(v, path):
     if v in ("auto", "none"):
         return v
@@ -255,6 +264,8 @@ class HingeSection:
     damping_ratio: float = spec(0.043, number(0.0, 1e3, why=_WHY_STIFF), "s",
                                 "c/k (Rayleigh damping: c follows k)")
     overrides: dict = spec(None, optional(hinge_stiffness_map), "N m/rad", "k of named hinges")
+    damping_overrides: dict = spec(None, optional(hinge_damping_map), "N m s/rad",
+                                   "c of named hinges (one spring), instead of damping_ratio * k")
     groups: Any = spec("auto", groups, "", "hinges sharing one stiffness: auto (mirror symmetry), none, or lists")
 
 
@@ -317,6 +328,17 @@ class CollisionSection:
                                             f"{COLLISION_MARGIN:g} m"), "m",
                             "interference depth beyond which touching panels count as colliding")
     refine: bool = spec(True, boolean, "", "refine between samples so that no collision is missed")
+    noise: float = spec(0.0, number(0.0, 0.1, why="encoders that noisy locate nothing"), "rad",
+                        "standard deviation of measured angles (encoders); above 0 a collision "
+                        "must be deeper than the noise can fake, and approaching; 0: a "
+                        "simulated stream")
+    speed_interval: float = spec(None, optional(number(0.0, 10.0)), "s",
+                                 "spacing of Eq. 7's two distances on a fixed grid; 0: the "
+                                 "stream's own samples; null: the scene's sample interval")
+    stamps: str = spec("header", choice("header", "receipt"), "",
+                       "a joint state's time: header (its header.stamp) or receipt (when it "
+                       "arrived: the node's receipt, a recording's log time), for drivers "
+                       "that leave stamps unfilled")
 
 
 def _bounds(v, path):

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import yaml
 
+from . import contract
 from .errors import SceneError
 from .model import Model
 from .scene import Scene, apply_overrides, scene_from_dict
@@ -15,22 +16,27 @@ from .validate import load_yaml, yaml_problem
 def scene_yaml(scene: Scene, model: Model | None = None) -> str:
     """The scene as YAML text, as ``/panel_deploy/model`` and recordings carry it.
 
-    With ``model``, its k per hinge becomes ``hinges.overrides`` and, when
-    every sprung hinge has the same c/k, that ratio ``hinges.damping_ratio``,
-    so that readers rebuild the model's k and c.
+    With ``model``, its k per hinge becomes ``hinges.overrides`` and its c:
+    when every sprung hinge has the same c/k, that ratio as
+    ``hinges.damping_ratio``, else each c as ``hinges.damping_overrides``,
+    so that readers rebuild the model's k and c exactly.
     """
     data = dict(scene.data)
     if model is not None:
         hinges = dict(data.get("hinges") or {})
+        hinges.pop("damping_overrides", None)
         hinges["overrides"] = {h.name: float(h.k) for h in model.hinges}
         ratios = {h.c / h.k for h in model.hinges if h.k > 0}
-        if ratios and max(ratios) - min(ratios) <= 1e-12 * max(ratios):
+        unsprung = [h for h in model.hinges if h.k == 0 and h.c != 0]
+        if ratios and max(ratios) - min(ratios) <= 1e-12 * max(ratios) and not unsprung:
             hinges["damping_ratio"] = float(min(ratios))
+        elif ratios or unsprung:
+            hinges["damping_overrides"] = {h.name: float(h.c) for h in model.hinges}
         data["hinges"] = hinges
     return yaml.safe_dump(data, sort_keys=False)
 
 
-def scene_from_yaml(text: str, source: str = "/panel_deploy/model") -> Scene:
+def scene_from_yaml(text: str, source: str = contract.resolve(contract.MODEL.name)) -> Scene:
     """Parse and validate a scene sent as YAML text.
 
     Raises

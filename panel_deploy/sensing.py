@@ -190,3 +190,52 @@ class LoopSolver:
         moved = self._residual(theta + FD_STEP * omega, cut_target + FD_STEP * cut_rate)
         omega[self.missing] = np.linalg.lstsq(J, -(moved - r0) / FD_STEP, rcond=None)[0]
         return theta, omega
+
+
+class TreeCoordinates:
+    """The tree angles and rates of any hinge set the loop closure completes:
+    the columns the set carries, the rest solved (:class:`LoopSolver`, one
+    per set of names, kept).
+
+    Attributes
+    ----------
+    solved : list of str
+        Tree hinges the last call solved from the loop closure.
+    """
+
+    def __init__(self, model: Model):
+        self.model = model
+        order = hinge_order(model)
+        self.required = [model.hinges[h].name for h in order[:model.n_coords]]
+        self._solvers: dict = {}
+        self.solved: list = []
+
+    def __call__(self, names, position, velocity=None) -> tuple:
+        """``(theta, omega)`` of the tree coordinates (rad, rad/s; omega None
+        without ``velocity``) from one sample's ``position`` (and ``velocity``)
+        of hinges ``names``.
+
+        Raises
+        ------
+        TrajectoryError
+            Names that do not determine the tree's angles (naming one), or
+            angles that cannot close the loop.
+        """
+        index = {name: i for i, name in enumerate(names)}
+        position = np.asarray(position, dtype=float)
+        velocity = None if velocity is None else np.asarray(velocity, dtype=float)
+        if all(h in index for h in self.required):
+            rows = [index[h] for h in self.required]
+            self.solved = []
+            return position[rows], None if velocity is None else velocity[rows]
+        key = frozenset(index)
+        if key not in self._solvers:
+            self._solvers[key] = LoopSolver(self.model, key)
+        solver = self._solvers[key]
+        known = [index[solver.tree_names[i]] for i in solver.known]
+        cuts = [index[name] for name in solver.cut_names]
+        theta, omega = solver.solve(position[known], position[cuts],
+                                    None if velocity is None else velocity[known],
+                                    None if velocity is None else velocity[cuts])
+        self.solved = [solver.tree_names[i] for i in solver.missing]
+        return theta, omega

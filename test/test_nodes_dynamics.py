@@ -232,7 +232,7 @@ def test_a_failing_deployment_is_an_error_status_and_the_node_deploys_again(monk
         assert client.trigger("/guarded/dynamics/deploy").success
         wait_for(lambda: len(outcomes()) == 2, what="the second outcome")
         values = messages.values(outcomes()[-1])
-        assert values["success"] == "True" and int(values["samples"]) == 21
+        assert values["success"] is True and values["samples"] == 21
     finally:
         client.executor.remove_node(node)
         node.destroy_node()

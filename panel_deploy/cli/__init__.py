@@ -114,8 +114,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("trajectory", help="trajectory .npz written by simulate --out, or an MCAP "
                                       "recording (its /joint_states)")
     s.add_argument("--scene", help="the recording's scene (file or shipped name); default: "
-                                   "its /panel_deploy/model")
+                                   "the one it ran")
+    s.add_argument("--namespace", help="the array whose joint states to check, in a recording "
+                                       "of several (e.g. array1)")
     s.add_argument("--json", action="store_true")
+    add_set(s)
     s.set_defaults(func=_command("collide", "collide_command"))
 
     s = sub.add_parser("optimise", help="hinge stiffnesses for a collision-free deployment (Eq. 8)")
@@ -150,7 +153,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--at", default="0,0.1,0.2,0.3,0.4", metavar="T,T,...",
                    help="instants of the --png frames, s")
     s.add_argument("--scene", help="the recording's scene (file or shipped name); default: "
-                                   "its /panel_deploy/model")
+                                   "the one it ran")
+    s.add_argument("--namespace", help="the array to show, in a recording of several (e.g. array1)")
     s.set_defaults(func=_command("replay", "replay_command"))
 
     s = sub.add_parser("export", help="export the model (MuJoCo MJCF)")

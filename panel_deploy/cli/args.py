@@ -44,7 +44,8 @@ def alias(parser, flag: str, key: str, **kwargs) -> None:
 
 
 def scene_of(args, name_attr: str = "scene"):
-    """The scene ``args`` name (a file or a shipped scene's name), with the
+    """The scene ``args`` name (a file, a shipped scene's name, or an MCAP
+    recording: the scene its deployment ran, overrides included), with the
     ``--set`` items and their aliases applied.
 
     Raises
@@ -55,9 +56,15 @@ def scene_of(args, name_attr: str = "scene"):
     """
     from ..scene import load_scene, resolve_scene
 
+    from ..record.reader import is_mcap
+
     aliases = getattr(args, "aliases", None) or {}
+    name, overrides = getattr(args, name_attr), getattr(args, "set", None) or ()
     try:
-        return load_scene(resolve_scene(getattr(args, name_attr)), getattr(args, "set", None) or ())
+        if is_mcap(name):
+            from ..record.analysis import recorded_scene
+            return recorded_scene(name, overrides=overrides)[1]
+        return load_scene(resolve_scene(name), overrides)
     except SceneError as e:
         flag = next((f for key, f in aliases.items()
                      if str(e.path) == f"--set {key}" or str(e.path).startswith(f"--set {key}[")),

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import sys
 
-from ..build import build_model
 from ..collision import CollisionSettings, check_trajectory
 from ..errors import SceneError
 from ..record.reader import is_mcap
@@ -14,9 +13,11 @@ from ..validate import check_stored_trajectory, first_non_finite_value
 
 
 def collide_command(args) -> int:
-    """Check ``args.trajectory``: a ``.npz`` of ``simulate --out`` or the
-    ``/joint_states`` of an MCAP recording (its scene from ``--scene``, else
-    from the recording).
+    """Check ``args.trajectory``: a ``.npz`` of ``simulate --out``, or the joint
+    states of an MCAP recording (its scene from ``--scene``, else the one it
+    ran), checked as the ``collision_monitor`` node checks the same stream
+    (:func:`~panel_deploy.record.analysis.check_recording`); ``--set`` items
+    apply to the scene (``collision.noise=1e-3``).
 
     The model is rebuilt from the scene stored in the file; only its geometry
     and tree matter here, not the stored stiffnesses. A stored run that failed
@@ -24,23 +25,31 @@ def collide_command(args) -> int:
     number of the report came out non-finite (the inputs are checked finite
     first, so this is a safety net).
     """
-    mcap = is_mcap(args.trajectory)
-    if mcap:
-        from ..record.analysis import recording_trajectory
-        result, scene = recording_trajectory(args.trajectory, args.scene)
-        model = build_model(scene)
-    elif args.scene:
-        raise SceneError("--scene", "only for an MCAP recording; a .npz trajectory carries its scene")
+    overrides = getattr(args, "set", None) or ()
+    verdict = None
+    if is_mcap(args.trajectory):
+        from ..record.analysis import check_recording, read_deployment
+        d = read_deployment(args.trajectory, args.scene, args.namespace, overrides)
+        stream, report = check_recording(d)
+        result, level_text = d.track, stream.verdict()[:2]
+        verdict = {"level": level_text[0], "message": level_text[1]}
     else:
+        if args.scene or args.namespace:
+            raise SceneError("--scene" if args.scene else "--namespace",
+                             "only for an MCAP recording; a .npz trajectory carries its scene")
         result, scene, model = load_trajectory(args.trajectory)[:3]
-    check_stored_trajectory(args.trajectory, result, model)
-    report = check_trajectory(model, result, CollisionSettings.from_scene(scene))
+        if overrides:
+            scene = scene_with(scene, overrides)
+        check_stored_trajectory(args.trajectory, result, model)
+        report = check_trajectory(model, result, CollisionSettings.from_scene(scene))
     failed = getattr(result, "success", True) is False
     out = report.to_dict()
     bad = first_non_finite_value(out)
     if bad is not None:  # a NaN is never an answer
         print(f"panel-deploy: collide: non-finite result: {bad}", file=sys.stderr)
         return 1
+    if verdict is not None:
+        out["verdict"] = verdict
     if args.json:
         if failed:  # the run stopped early: the check covers only what it computed
             out["run"] = {"success": False, "status": int(result.status), "message": result.message,
@@ -51,4 +60,16 @@ def collide_command(args) -> int:
             print(f"the stored run FAILED at t = {result.t[-1]:.4g} s ({result.message}): "
                   "checked up to there")
         print(report.to_text())
+        if verdict is not None and verdict["level"] == 1:
+            print(f"stream: {verdict['message']}")
     return 0
+
+
+def scene_with(scene, overrides):
+    """``scene`` with ``--set`` items applied, validated; errors name the item."""
+    from ..scene import apply_overrides, scene_from_dict
+
+    try:
+        return scene_from_dict(apply_overrides(scene.data, overrides), source=scene.source)
+    except SceneError as e:
+        raise SceneError(f"--set {e.path}", e.reason) from None

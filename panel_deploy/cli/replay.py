@@ -38,7 +38,7 @@ def replay_command(args) -> int:
         raise SceneError("--spawn", "no display for the rerun viewer (DISPLAY is not set); write "
                                     "a file with --save OUT.rrd, serve with --serve or render "
                                     "--png STRIP.png")
-    d = read_deployment(args.recording, args.scene)
+    d = read_deployment(args.recording, args.scene, args.namespace)
     if args.png:
         render_strip(d, at, args.png)
         print(f"{len(at)} frames -> {args.png}")

@@ -165,10 +165,16 @@ class CollisionSettings:
 
     @classmethod
     def from_scene(cls, scene, **overrides) -> "CollisionSettings":
-        """Settings from a Scene (or its ``collision`` section); missing keys keep defaults."""
+        """Settings from a Scene (or its ``collision`` section); missing keys
+        keep defaults. ``collision.speed_interval: null`` is the scene's
+        sample interval (0, the stream's own samples, without a simulation
+        section)."""
         section = getattr(scene, "collision", scene)
         known = {f.name for f in fields(cls)}
         values = {k: getattr(section, k) for k in known if hasattr(section, k)}
+        if values.get("speed_interval", 0.0) is None:
+            sim = getattr(scene, "simulation", None)
+            values["speed_interval"] = sim.t_end / (sim.samples - 1) if sim is not None else 0.0
         values.update(overrides)
         return cls(**values)
 

@@ -28,7 +28,7 @@ import numpy as np
 from ..model import hinge_order
 from ..errors import TrajectoryError
 from ..model import Model
-from ..sensing import LoopSolver
+from ..sensing import TreeCoordinates
 from .check import TrajectoryCheck
 from .monitor import CollisionSettings
 
@@ -78,7 +78,7 @@ class StreamCheck:
         self.collision = collision
         self.names = [model.hinges[h].name for h in hinge_order(model)]
         self.required = self.names[:model.n_coords]
-        self._solvers: dict = {}
+        self._coordinates = TreeCoordinates(model)
         self.check = None
         self.deployments = 0
         self.origin = None
@@ -133,24 +133,10 @@ class StreamCheck:
         return self.update(t, theta, omega)
 
     def coordinates(self, names, position, velocity=None) -> tuple:
-        """Tree angles and rates (None without ``velocity``) of a message's hinges."""
-        index = {name: i for i, name in enumerate(names)}
-        position = np.asarray(position, dtype=float)
-        velocity = None if velocity is None else np.asarray(velocity, dtype=float)
-        if all(h in index for h in self.required):
-            rows = [index[h] for h in self.required]
-            self.solved = []
-            return position[rows], None if velocity is None else velocity[rows]
-        key = frozenset(index)
-        if key not in self._solvers:
-            self._solvers[key] = LoopSolver(self.model, key)
-        solver = self._solvers[key]
-        known = [index[solver.tree_names[i]] for i in solver.known]
-        cuts = [index[name] for name in solver.cut_names]
-        theta, omega = solver.solve(position[known], position[cuts],
-                                    None if velocity is None else velocity[known],
-                                    None if velocity is None else velocity[cuts])
-        self.solved = [solver.tree_names[i] for i in solver.missing]
+        """Tree angles and rates (None without ``velocity``) of a message's hinges
+        (:class:`~panel_deploy.sensing.TreeCoordinates`)."""
+        theta, omega = self._coordinates(names, position, velocity)
+        self.solved = self._coordinates.solved
         return theta, omega
 
     def _start(self, t, theta, omega) -> list:

@@ -30,16 +30,20 @@ from ..scene_text import scene_from_yaml
 from . import messages, runtime
 
 PARAMETERS = {
-    "tolerance": (-1.0, "interference depth that counts as a collision, m; negative: the scene's",
-                  (-1.0, 0.02)),
+    "tolerance": (-1.0, "interference depth that counts as a collision, m; negative: the scene's "
+                        "collision.tolerance", (-1.0, 0.02)),
     "refine": (True, "also check between samples (Hermite motion), so no collision is missed"),
-    "noise": (0.0, "standard deviation of the measured angles, rad (encoders); 0 for a simulated "
-                   "stream", (0.0, 0.1)),
+    "noise": (-1.0, "standard deviation of the measured angles, rad (encoders); negative: the "
+                    "scene's collision.noise", (-1.0, 0.1)),
     "speed_interval": (-1.0, "spacing of Eq. 7's distances, s; 0: the stream's own samples; "
-                             "negative: the scene's sample interval", (-1.0, 10.0)),
-    "stamps": ("header", "header: a joint state's time is its header.stamp; receipt: the time it "
-                         "arrived (drivers that leave stamps unfilled)"),
+                             "negative: the scene's collision.speed_interval", (-1.0, 10.0)),
+    "stamps": ("", "header: a joint state's time is its header.stamp; receipt: the time it "
+                   "arrived (drivers that leave stamps unfilled); empty: the scene's "
+                   "collision.stamps"),
 }
+#: The scene's collision keys a parameter overrides when it holds no "the scene's" value.
+_OVERRIDES = {"tolerance": lambda v: v >= 0, "noise": lambda v: v >= 0,
+              "speed_interval": lambda v: v >= 0, "stamps": bool, "refine": lambda v: True}
 
 
 class CollisionMonitorNode(Node):
@@ -58,37 +62,39 @@ class CollisionMonitorNode(Node):
         runtime.subscription(self, contract.JOINT_STATES, self._on_joint_state)
         runtime.trigger_service(self, contract.RESET, self._reset)
         self._throttle = Throttle()
-        self._receipt = self.get_parameter("stamps").value == "receipt"  # read per message
+        self._apply()
         self.create_timer(0.5, self._publish_verdict)
 
-    def _collision(self, changes=None) -> CollisionSettings:
+    def _collision(self, changes=None) -> tuple:
+        """``(settings, receipt)``: the scene's collision settings with the
+        parameters that override them, and whether stamps are arrival times."""
         p = {**runtime.values(self, PARAMETERS), **(changes or {})}
-        section = self.scene.collision if self.scene is not None else CollisionSettings()
-        tolerance = section.tolerance if p["tolerance"] < 0 else p["tolerance"]
-        if not math.isfinite(tolerance):
-            raise SceneError("tolerance", f"expected a finite number, got {shown(tolerance)}")
-        if p["stamps"] not in ("header", "receipt"):
-            raise SceneError("stamps", f"expected header or receipt, got {shown(p['stamps'])}")
-        interval = p["speed_interval"]
-        if interval < 0:
-            sim = self.scene.simulation if self.scene is not None else None
-            interval = sim.t_end / (sim.samples - 1) if sim is not None else 0.0
+        given = {k: v for k, v in p.items() if _OVERRIDES[k](v)}
+        if given.get("stamps", "header") not in ("header", "receipt"):
+            raise SceneError("stamps", f"expected header or receipt (or empty for the scene's), "
+                                       f"got {shown(given['stamps'])}")
+        if not math.isfinite(given.get("tolerance", 0.0)):
+            raise SceneError("tolerance", f"expected a finite number, got {shown(given['tolerance'])}")
+        scene = self.scene if self.scene is not None else CollisionSettings()
+        receipt = given.pop("stamps", getattr(getattr(scene, "collision", None), "stamps", "header"))
+        if "tolerance" in given:
+            given["margin"] = max(CollisionSettings.margin, given["tolerance"])
         try:
-            return CollisionSettings.from_scene(section, tolerance=tolerance, refine=p["refine"],
-                                                margin=max(CollisionSettings.margin, tolerance),
-                                                noise=float(p["noise"]), speed_interval=interval)
+            return CollisionSettings.from_scene(scene, **given), receipt == "receipt"
         except SceneError as e:  # named as the node's parameter, not the scene key
             raise SceneError(e.path.removeprefix("collision."), e.reason) from None
 
-    def _apply(self, params):
-        self._receipt = self.get_parameter("stamps").value == "receipt"
-        if self.stream is not None:  # from the next deployment on
-            self.stream.collision = self._collision()
+    def _apply(self, params=None):
+        """The stamps rule at once; the rest from the next deployment."""
+        collision, self._receipt = self._collision()
+        if self.stream is not None:
+            self.stream.collision = collision
 
     def _on_model(self, msg):
         try:
             self.scene = scene_from_yaml(msg.data)
-            self.stream = StreamCheck(build_model(self.scene), self._collision())
+            collision, self._receipt = self._collision()
+            self.stream = StreamCheck(build_model(self.scene), collision)
         except PanelDeployError as e:
             self._warn("model", f"ignored a model: {e}")
             return

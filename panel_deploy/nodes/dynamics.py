@@ -96,7 +96,7 @@ class DynamicsNode(runtime.WorkerNode):
             configure(self.scene, params)
 
     def _deploy(self, request, response):
-        if self.busy(response, "a deployment", "~/stop"):
+        if self.busy(response, "a deployment", contract.STOP):
             return response
         try:
             params = self.parameters()

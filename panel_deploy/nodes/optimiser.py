@@ -76,7 +76,7 @@ class OptimiserNode(runtime.WorkerNode):
                                   seed=None if p["seed"] < 0 else p["seed"]), p
 
     def _optimise(self, request, response):
-        if self.busy(response, "an optimisation", "~/cancel"):
+        if self.busy(response, "an optimisation", contract.CANCEL):
             return response
         try:
             scene, p = self._search_scene()

@@ -182,10 +182,11 @@ class WorkerNode(Node):
     def running(self) -> bool:
         return self._worker is not None and self._worker.is_alive()
 
-    def busy(self, response, job: str, stop: str) -> bool:
-        """Refuse in ``response`` (and return True) while ``job`` runs or before a model came."""
+    def busy(self, response, job: str, stop: contract.Service) -> bool:
+        """Refuse in ``response`` (and return True) while ``job`` runs (``stop``
+        ends it) or before a model came."""
         if self.running:
-            response.success, response.message = False, f"{job} is running; {stop} it first"
+            response.success, response.message = False, f"{job} is running; ~/{stop.name} it first"
         elif self.scene is None:
             response.success, response.message = False, (
                 "no model yet on " + self.resolve_topic_name(contract.MODEL.name))

@@ -1,7 +1,9 @@
-"""A recording's ``/joint_states`` on a scene's model: what ``collide`` and ``replay`` take.
+"""A recording's joint states on a scene's model: what ``collide``, ``replay`` and
+``simulate RECORDING.mcap`` take.
 
 The scene is ``--scene`` when given (a real array's recording carries none),
-else the recording's ``/panel_deploy/model``.
+else the one the recording ran (its ``dynamics/scene``, else its
+``panel_deploy/model``), with ``--set`` items applied either way.
 """
 
 from __future__ import annotations
@@ -9,7 +11,8 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 
-from ..errors import TrajectoryError
+from .. import contract
+from ..errors import PanelDeployError, SceneError, TrajectoryError
 from .reader import (HingeTrack, JointStates, Recording, hinge_track, joint_states,
                      open_recording)
 
@@ -22,33 +25,59 @@ class RecordedDeployment:
     scene: object
     model: object
     track: HingeTrack
-    states: JointStates  #: every joint of ``/joint_states``, as recorded
+    states: JointStates  #: every joint of the joint states, as recorded
 
 
-def read_deployment(path, scene: str | None = None) -> RecordedDeployment:
-    """Open ``path`` and map its ``/joint_states`` onto the scene's hinges.
+def recorded_scene(path, scene: str | None = None, namespace: str | None = None,
+                   overrides=()) -> tuple:
+    """``(recording, scene)``: the recording at ``path`` and the scene its
+    deployment ran (``scene``, a file or shipped name, when given), with
+    ``overrides`` (``--set`` items) applied.
+
+    Raises
+    ------
+    TrajectoryError
+        An unreadable or foreign file, or no scene in it and none given.
+    SceneError
+        ``scene`` or an override is not valid.
+    """
+    from ..scene import apply_overrides, load_scene, resolve_scene, scene_from_dict
+
+    recording = open_recording(path, namespace)
+    if scene:
+        return recording, load_scene(resolve_scene(scene), overrides)
+    parsed = recording.scene()
+    if parsed is None:
+        cut = f" (the file was cut short: {recording.truncated})" if recording.truncated else ""
+        raise TrajectoryError(f"{path}: no {recording.topic(contract.MODEL)} in this "
+                              f"recording{cut}; name its scene with --scene SCENE")
+    if not overrides:
+        return recording, parsed
+    data = apply_overrides(parsed.data, overrides)
+    try:
+        return recording, scene_from_dict(data, source=parsed.source)
+    except SceneError as e:
+        raise SceneError(f"--set {e.path}", e.reason) from None
+
+
+def read_deployment(path, scene: str | None = None, namespace: str | None = None,
+                    overrides=()) -> RecordedDeployment:
+    """Open ``path`` and map its joint states onto the scene's hinges
+    (:func:`recorded_scene` says which scene).
 
     A truncated file is read up to where it ends, with a note on stderr.
 
     Raises
     ------
     TrajectoryError
-        An unreadable or foreign file, no scene (neither ``scene`` nor
-        ``/panel_deploy/model``), or joint states that are not the scene's hinges.
+        An unreadable or foreign file, no scene, or joint states that are
+        not the scene's hinges.
     SceneError
-        ``scene`` is not a valid scene.
+        ``scene`` or an override is not valid.
     """
     from ..build import build_model
-    from ..scene import load_scene, resolve_scene
 
-    recording = open_recording(path)
-    if scene:
-        parsed = load_scene(resolve_scene(scene))
-    else:
-        parsed = recording.scene()
-        if parsed is None:
-            raise TrajectoryError(f"{path}: no /panel_deploy/model in this recording; "
-                                  f"name its scene with --scene SCENE")
+    recording, parsed = recorded_scene(path, scene, namespace, overrides)
     model = build_model(parsed)
     states = joint_states(recording)
     track = hinge_track(states, model, path, parsed.name or str(parsed.source or ""))
@@ -56,14 +85,36 @@ def read_deployment(path, scene: str | None = None) -> RecordedDeployment:
         print(f"panel-deploy: note: {path} is truncated ({recording.truncated}); read up to "
               f"t = {track.t[-1] + track.t0:.4f} s ({len(track.t)} joint states)", file=sys.stderr)
     if track.t0:
-        print(f"panel-deploy: note: times are counted from the first /joint_states stamp, "
+        print(f"panel-deploy: note: times are counted from the first joint state's stamp, "
               f"{track.t0:.9f} s", file=sys.stderr)
     return RecordedDeployment(recording, parsed, model, track, states)
 
 
-def recording_trajectory(path, scene: str | None = None):
-    """``(track, scene)`` for the collision check of ``panel-deploy collide FILE.mcap``;
-    ``track`` has the ``t``, ``theta`` and ``omega`` that
-    :func:`~panel_deploy.collision.check.check_trajectory` reads."""
-    d = read_deployment(path, scene)
-    return d.track, d.scene
+def check_recording(d: RecordedDeployment):
+    """The collision check of a recording's joint states, done as the
+    ``collision_monitor`` node does it on the same stream: message by
+    message through :class:`~panel_deploy.collision.StreamCheck` with the
+    scene's ``collision`` settings (noise, stamps, speed interval), hinges
+    the stream lacks solved from the loop closure, gaps counted.
+
+    Returns ``(stream, report)``: the StreamCheck (its :meth:`verdict`) and
+    the first deployment's :class:`~panel_deploy.collision.check.CollisionReport`.
+    """
+    from ..collision import CollisionSettings, StreamCheck
+
+    settings = CollisionSettings.from_scene(d.scene)
+    stream = StreamCheck(d.model, settings)
+    states = d.states
+    times = states.log_time if d.scene.collision.stamps == "receipt" else states.t
+    for j, t in enumerate(times):
+        if stream.check is not None and t <= stream.origin and stream.check.checked > 1:
+            break  # the stream starts again (a replay, the next run): one deployment is checked
+        velocity = None if states.velocity is None else states.velocity[j]
+        try:
+            stream.update_joints(float(t), states.names, states.position[j], velocity)
+        except PanelDeployError as e:  # refused as the node refuses it: counted, skipped
+            stream.refuse(str(e).split(":", 1)[0][:40])
+    if stream.check is None:
+        raise TrajectoryError(f"{d.recording.path}: no joint state could be checked "
+                              f"({', '.join(f'{k}: {v}' for k, v in stream.refused.items())})")
+    return stream, stream.check.report()

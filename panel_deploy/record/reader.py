@@ -25,6 +25,8 @@ from mcap.records import Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
 from ..errors import PanelDeployError, TrajectoryError, shown
+from .. import contract
+from ..model import hinge_order
 from . import messages
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -65,6 +67,9 @@ class Recording:
     truncated : str or None
         Why the file ends early (then it was read up to its last complete
         record); None for a complete file.
+    namespace : str
+        The graph namespace whose topics :meth:`topic` names ("" for the
+        root): see :func:`open_recording`.
     """
 
     path: Path
@@ -74,7 +79,17 @@ class Recording:
     encodings: dict = field(default_factory=dict)
     metadata: dict = field(default_factory=dict)
     truncated: str | None = None
+    namespace: str = ""
     _raw: dict = field(default_factory=dict, repr=False)   # topic -> [(log_time ns, bytes)]
+
+    def topic(self, topic: contract.Topic) -> str:
+        """The name of a contract topic in this recording's namespace."""
+        return contract.resolve(topic.name, self.namespace)
+
+    def namespaces(self) -> list:
+        """Every namespace whose ``joint_states`` this file holds, sorted."""
+        found = (contract.namespace_of(name, contract.JOINT_STATES) for name in self.topics)
+        return sorted({ns for ns in found if ns is not None})
 
     def count(self, topic: str) -> int:
         """Messages read on ``topic``."""
@@ -108,32 +123,42 @@ class Recording:
         return out
 
     def scene(self):
-        """The scene of ``/panel_deploy/model`` (its last message), or None without one.
+        """The scene the recorded deployment ran: the last ``dynamics/scene``
+        (the effective scene, overrides included), else the last
+        ``panel_deploy/model``; None without either.
 
         Raises
         ------
         TrajectoryError
             The scene text is not a valid scene.
         """
-        if not self.count("/panel_deploy/model"):
-            return None
         from ..scene_text import scene_from_yaml
 
-        text = self.messages("/panel_deploy/model", messages.STRING)[-1][1].data
-        try:
-            return scene_from_yaml(text, source=f"{self.path}:/panel_deploy/model")
-        except PanelDeployError as e:
-            raise TrajectoryError(f"{self.path}: /panel_deploy/model is not a valid scene ({e})") from None
+        for topic in (contract.DEPLOYED_SCENE, contract.MODEL):
+            name = self.topic(topic)
+            if self.count(name):
+                text = self.messages(name, topic.type)[-1][1].data
+                try:
+                    return scene_from_yaml(text, source=f"{self.path}:{name}")
+                except PanelDeployError as e:
+                    raise TrajectoryError(f"{self.path}: {name} is not a valid scene ({e})") from None
+        return None
 
 
-def open_recording(path) -> Recording:
+def open_recording(path, namespace: str | None = None) -> Recording:
     """Read an MCAP file's records (messages kept as bytes, decoded on demand).
+
+    ``namespace`` chooses the graph whose topics the recording's readers take
+    (``array7`` or ``/array7``: ``/array7/joint_states``); None takes the one
+    graph whose ``joint_states`` the file holds (the root when there is none).
 
     Raises
     ------
     TrajectoryError
         Missing, empty, not MCAP, corrupt (a record that does not parse, a
-        chunk whose CRC or compression fails), or nothing recorded.
+        chunk whose CRC or compression fails), nothing recorded, joint states
+        of several graphs and no ``namespace``, or a ``namespace`` the file
+        has no joint states of.
     """
     path = Path(path)
     try:
@@ -153,7 +178,24 @@ def open_recording(path) -> Recording:
     if not recording._raw:
         why = f" ({recording.truncated})" if recording.truncated else ""
         raise TrajectoryError(f"{path}: no messages in this recording{why}")
+    recording.namespace = _namespace(recording, namespace)
     return recording
+
+
+def _namespace(recording: Recording, namespace: str | None) -> str:
+    found = recording.namespaces()
+    if namespace is not None:
+        wanted = "/" + namespace.strip("/") if namespace.strip("/") else ""
+        if found and wanted not in found:
+            raise TrajectoryError(f"{recording.path}: no joint states in namespace "
+                                  f"{shown(wanted or '/')} (this file has them in "
+                                  f"{', '.join(ns or '/' for ns in found)})")
+        return wanted
+    if len(found) > 1:
+        raise TrajectoryError(f"{recording.path}: joint states of several arrays "
+                              f"({', '.join(ns or '/' for ns in found)}): choose one with "
+                              f"--namespace")
+    return found[0] if found else ""
 
 
 def _read_records(recording: Recording, data, size: int) -> None:
@@ -251,6 +293,9 @@ class JointStates:
         rad.
     velocity, effort : (s, n) ndarray or None
         rad/s and N m; None when the messages carry none.
+    log_time : (s,) ndarray
+        When each message was recorded (the MCAP log time), s: its arrival
+        for ``ros2 bag record``, its stamp for this package's recordings.
     """
 
     t: np.ndarray
@@ -258,6 +303,7 @@ class JointStates:
     position: np.ndarray
     velocity: np.ndarray | None
     effort: np.ndarray | None
+    log_time: np.ndarray | None = None
 
 
 def joint_states(recording: Recording) -> JointStates:
@@ -271,22 +317,24 @@ def joint_states(recording: Recording) -> JointStates:
         are not finite, or whose stamp is not after the previous one's.
     """
     path = recording.path
-    msgs = [msg for _, msg in recording.messages("/joint_states", messages.JOINT_STATE)]
+    topic = recording.topic(contract.JOINT_STATES)
+    logged = recording.messages(topic, contract.JOINT_STATE)
+    msgs = [msg for _, msg in logged]
     if not msgs:
-        raise TrajectoryError(f"{path}: /joint_states has no messages")
+        raise TrajectoryError(f"{path}: {topic} has no messages")
     names = list(msgs[0].name)
     n, s = len(names), len(msgs)
     if n == 0 or len(set(names)) != n:
-        raise TrajectoryError(f"{path}: /joint_states message 0 names "
+        raise TrajectoryError(f"{path}: {topic} message 0 names "
                               f"{'no joint' if n == 0 else 'a joint twice'}")
     t = np.empty(s)
     arrays = {"position": np.empty((s, n)), "velocity": np.empty((s, n)), "effort": np.empty((s, n))}
     present = {key: len(getattr(msgs[0], key)) == n for key in arrays}
     if not present["position"]:
-        raise TrajectoryError(f"{path}: /joint_states message 0 has {len(msgs[0].position)} "
+        raise TrajectoryError(f"{path}: {topic} message 0 has {len(msgs[0].position)} "
                               f"positions for {n} names")
     for j, msg in enumerate(msgs):
-        where = f"{path}: /joint_states message {j}"
+        where = f"{path}: {topic} message {j}"
         order = list(range(n)) if list(msg.name) == names else _order(msg.name, names, where)
         for key, out in arrays.items():
             values = getattr(msg, key)
@@ -301,11 +349,12 @@ def joint_states(recording: Recording) -> JointStates:
     for key, out in arrays.items():
         if present[key] and not np.all(np.isfinite(out)):
             j, i = (int(x) for x in np.argwhere(~np.isfinite(out))[0])
-            raise TrajectoryError(f"{path}: /joint_states message {j}: {key} of {names[i]} is "
+            raise TrajectoryError(f"{path}: {topic} message {j}: {key} of {names[i]} is "
                                   f"{out[j, i]} (not finite)")
     return JointStates(t, names, arrays["position"],
                        arrays["velocity"] if present["velocity"] else None,
-                       arrays["effort"] if present["effort"] else None)
+                       arrays["effort"] if present["effort"] else None,
+                       np.array([log_time for log_time, _ in logged], dtype=float) * 1e-9)
 
 
 def _order(given, names, where):
@@ -341,26 +390,35 @@ class HingeTrack:
 
 
 def hinge_track(states: JointStates, model, path, scene_name: str = "") -> HingeTrack:
-    """``states`` on ``model``'s tree hinges (cut hinges may be present and are not needed).
+    """``states`` on ``model``'s tree hinges: the tree hinges the stream
+    carries, the others solved from the loop closure (any hinge set the
+    closure completes, as the collision monitor takes).
 
     Raises
     ------
     TrajectoryError
-        A joint that is no hinge of the model, or a tree hinge missing.
+        A joint that is no hinge of the model, or a hinge set that does not
+        determine the tree's angles (naming a hinge).
     """
-    from ..model import hinge_order
+    from ..sensing import TreeCoordinates
 
     known = [model.hinges[h].name for h in hinge_order(model)]
-    tree = known[:model.n_coords]
     label = f"scene {scene_name}" if scene_name else "the scene"
     unknown = [name for name in states.names if name not in known]
-    missing = [name for name in tree if name not in states.names]
-    if unknown or missing:
-        what = (f"joint {shown(unknown[0])} is not a hinge of {label}" if unknown else
-                f"hinge {shown(missing[0])} of {label} is missing")
+    if unknown:
         raise TrajectoryError(f"{path}: /joint_states names are not the hinges of {label}: "
-                              f"{what} (hinges: {', '.join(known)})")
-    index = [states.names.index(name) for name in tree]
-    omega = (states.velocity[:, index] if states.velocity is not None
-             else [None] * len(states.t))
-    return HingeTrack(states.t - states.t[0], states.position[:, index], omega, float(states.t[0]))
+                              f"joint {shown(unknown[0])} is not a hinge of {label} "
+                              f"(hinges: {', '.join(known)})")
+    coordinates = TreeCoordinates(model)
+    s = len(states.t)
+    theta = np.empty((s, model.n_coords))
+    omega = np.empty((s, model.n_coords)) if states.velocity is not None else [None] * s
+    try:
+        for j in range(s):
+            velocity = None if states.velocity is None else states.velocity[j]
+            theta[j], w = coordinates(states.names, states.position[j], velocity)
+            if w is not None:
+                omega[j] = w
+    except TrajectoryError as e:
+        raise TrajectoryError(f"{path}: /joint_states of {label}, message {j}: {e}") from None
+    return HingeTrack(states.t - states.t[0], theta, omega, float(states.t[0]))

@@ -28,9 +28,11 @@ def scene_yaml(scene: Scene, model: Model | None = None) -> str:
         hinges["overrides"] = {h.name: float(h.k) for h in model.hinges}
         ratios = {h.c / h.k for h in model.hinges if h.k > 0}
         unsprung = [h for h in model.hinges if h.k == 0 and h.c != 0]
-        if ratios and max(ratios) - min(ratios) <= 1e-12 * max(ratios) and not unsprung:
+        if all(h.c == scene.hinges.damping_ratio * h.k for h in model.hinges):
+            pass  # the scene's own ratio rebuilds every c to the last bit
+        elif ratios and max(ratios) - min(ratios) <= 1e-12 * max(ratios) and not unsprung:
             hinges["damping_ratio"] = float(min(ratios))
-        elif ratios or unsprung:
+        else:
             hinges["damping_overrides"] = {h.name: float(h.c) for h in model.hinges}
         data["hinges"] = hinges
     return yaml.safe_dump(data, sort_keys=False)

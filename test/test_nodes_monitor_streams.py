@@ -193,7 +193,7 @@ def test_noise_parameter_stops_false_alarms(graph, deployment):
             publish(publisher, names, t[j], noisy[j])
         last = verdict_after(diagnostics, len(t))
     finally:
-        set_parameter(client, "noise", 0.0)
+        set_parameter(client, "noise", -1.0)  # the scene's again
     assert last.level == messages.ERROR
     assert float(values(last)["first_collision_t"]) >= report.first_collision.t
     assert values(last)["first_collision_pair"] in {",".join(e.names) for e in report.events}
@@ -216,3 +216,57 @@ def test_receipt_stamps_take_unfilled_stamps(graph, deployment):
     # (arrival times on a loaded machine may show gaps: a WARN, never a refusal)
     assert values(last)["refused"] == "0" and last.level in (messages.OK, messages.WARN)
     assert 0.15 < float(values(last)["t"]) < 5.0  # wall seconds since the first arrival
+
+
+def _recorded(path, names, t, position, velocity=None):
+    """The stream as a recording of the paper scene (our writer; any rosbag2 MCAP reads alike)."""
+    from panel_deploy.record import messages as m
+    from panel_deploy.record.writer import DeploymentWriter
+    from panel_deploy.scene_text import scene_yaml
+
+    empty = np.zeros(0)
+    with DeploymentWriter(path) as rec:
+        rec.write(contract.MODEL, m.string(scene_yaml(load_scene(resolve_scene("paper_4x4")))))
+        for j in range(len(t)):
+            rec.write(contract.JOINT_STATES, m.joint_state(
+                names, t[j], position[j], empty if velocity is None else velocity[j], empty))
+    return path
+
+
+@pytest.mark.parametrize("case", ["full", "noisy", "partial"])
+def test_collide_on_the_recorded_stream_gives_the_node_s_first_collision(graph, deployment, case,
+                                                                         tmp_path, capsys):
+    """The same joint states to the node and, recorded, to ``panel-deploy collide``:
+    the same first collision (pair, time, speed) for a full stream, a noisy one
+    (1e-3 rad, ``noise`` / ``collision.noise`` set) and one without a loop hinge."""
+    import json
+
+    from panel_deploy.cli import main
+
+    client, publisher, diagnostics, events, _ = graph
+    t, names, theta, omega, _ = deployment
+    keep = [i for i, name in enumerate(names) if case != "partial" or name != "r2c1-r3c1"]
+    sent = [names[i] for i in keep]
+    position, velocity = theta[:, keep], omega[:, keep]
+    overrides = []
+    if case == "noisy":
+        position = position + np.random.default_rng(5).normal(0.0, 1e-3, position.shape)
+        velocity = None
+        overrides = ["--set", "collision.noise=0.001"]
+        set_parameter(client, "noise", 1e-3)
+    try:
+        new_deployment(client, diagnostics, events)
+        for j in range(len(t)):
+            publish(publisher, sent, t[j], position[j], None if velocity is None else velocity[j])
+        node = values(verdict_after(diagnostics, len(t)))
+    finally:
+        set_parameter(client, "noise", -1.0)
+    recording = _recorded(tmp_path / f"{case}.mcap", sent, t, position, velocity)
+    capsys.readouterr()
+    assert main(["collide", str(recording), "--json", *overrides]) == 0
+    offline = json.loads(capsys.readouterr().out)
+    first = offline["first_collision"]
+    assert node["first_collision_pair"] == ",".join(first["pair"])
+    assert float(node["first_collision_t"]) == pytest.approx(first["t"], abs=1e-9)
+    assert float(node["approach_speed"]) == pytest.approx(offline["v"], rel=1e-9)
+    assert int(node["samples"]) == len(t) and offline["verdict"]["level"] == 2

@@ -111,9 +111,9 @@ def clock(t: float):
 def joint_state(names, t: float, theta, omega, torque):
     """Every hinge: position theta (rad), velocity omega (rad/s), effort torque (N m)."""
     return _T[JOINT_STATE](header=_header(t), name=list(names),
-                           position=np.asarray(theta, dtype=np.float64),
-                           velocity=np.asarray(omega, dtype=np.float64),
-                           effort=np.asarray(torque, dtype=np.float64))
+                           position=np.ascontiguousarray(theta, dtype=np.float64),
+                           velocity=np.ascontiguousarray(omega, dtype=np.float64),
+                           effort=np.ascontiguousarray(torque, dtype=np.float64))
 
 
 def _quaternions(R):

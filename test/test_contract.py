@@ -130,7 +130,14 @@ def test_a_recording_offers_each_topic_with_the_live_qos(tmp_path):
     assert main(["simulate", "paper_4x4", "--t-end", "0.05", "--record", str(path)]) == 0
     from mcap.reader import make_reader
     with open(path, "rb") as f:
-        channels = make_reader(f).get_summary().channels.values()
+        summary = make_reader(f).get_summary()
+    channels = summary.channels.values()
+    schemas = {s.name: s.data.decode() for s in summary.schemas.values()}
+    # the Jazzy definitions with their defaults (a Quaternion is w 1 unless set)
+    for name in ("tf2_msgs/msg/TFMessage", "visualization_msgs/msg/MarkerArray"):
+        quaternion = schemas[name].split("MSG: geometry_msgs/Quaternion\n")[1].split("\n=")[0]
+        assert quaternion.split("\n")[:4] == ["float64 x 0", "float64 y 0", "float64 z 0",
+                                              "float64 w 1"], name
     qos = {c.topic: yaml.safe_load(c.metadata["offered_qos_profiles"])[0] for c in channels}
     assert set(qos) == {contract.resolve(t.name) for t in contract.TOPICS}
     for topic in contract.TOPICS:

@@ -159,6 +159,11 @@ class StreamCheck:
         self.largest_gap = max(self.largest_gap, dt)
 
     @property
+    def last_stamp(self) -> float | None:
+        """The stamp of the last sample checked, s, in the stream's own clock (None before one)."""
+        return None if self.check is None else self._last
+
+    @property
     def typical_interval(self) -> float | None:
         """Median of the recent intervals between samples, s (None before there are enough)."""
         return float(np.median(self._intervals)) if len(self._intervals) == GAP_WINDOW else None

@@ -138,8 +138,10 @@ class CollisionMonitorNode(Node):
         if held:
             text += f" ({held} more like it held back)"
         self.get_logger().warning(text)
+        # Stamped in the stream's clock, as the verdicts: a recording logs it where it happened.
+        stamp = self.stream.last_stamp if self.stream is not None else None
         self.diagnostics.publish(messages.diagnostics(
-            self.get_clock().now().nanoseconds * 1e-9, messages.status(self.status_name, messages.WARN, text)))
+            stamp or 0.0, messages.status(self.status_name, messages.WARN, text)))
 
     def _publish_verdict(self):
         if self.stream is None:

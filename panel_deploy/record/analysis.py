@@ -85,8 +85,8 @@ def read_deployment(path, scene: str | None = None, namespace: str | None = None
         print(f"panel-deploy: note: {path} is truncated ({recording.truncated}); read up to "
               f"t = {track.t[-1] + track.t0:.4f} s ({len(track.t)} joint states)", file=sys.stderr)
     if track.t0:
-        print(f"panel-deploy: note: times are counted from the first joint state's stamp, "
-              f"{track.t0:.9f} s", file=sys.stderr)
+        print(f"panel-deploy: note: times are counted from the first "
+              f"{recording.topic(contract.JOINT_STATES)} stamp, {track.t0:.9f} s", file=sys.stderr)
     return RecordedDeployment(recording, parsed, model, track, states)
 
 

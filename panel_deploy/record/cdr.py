@@ -5,7 +5,9 @@ For one model the byte layout of ``/joint_states``, ``/panel_deploy/panels``,
 element counts, same string lengths), so each is a precomputed
 :mod:`struct` format into which a sample puts its stamp, angles, rates,
 torques and poses: one ``struct.pack`` per message instead of the generic
-field-by-field serializer, which costs more than the simulation it records.
+field-by-field serializer, which costs more than the simulation it records
+(measured 2026-11-26 on the paper scene: 48 us per sample for the four
+messages here, 528 us with rosbags building and serializing them, 11x).
 The bytes equal ``rosbags``' ``serialize_cdr`` of the messages that
 :mod:`.messages` builds from the same values (the tests check it).
 

@@ -1,12 +1,15 @@
 """A minimal MCAP writer: chunked, zstd-compressed, indexed, with a summary.
 
-Written for speed (a recording adds four messages per simulated sample, and
-a generic writer's per-message cost is most of the recording overhead) and
-for a file that stays readable when the process is killed: schema, channel
-and metadata records go to the file as soon as they are added, messages go
-into the open chunk, and :meth:`McapFile.close_chunk` writes the chunk
-(compressed, with its CRC and message indexes) and flushes it to the
-operating system.
+Why not ``mcap.writer.Writer`` (a dependency, used for reading): a recording
+must stay readable when its process is killed, so chunks close on log time
+(every 0.25 s of a deployment) and are flushed at once; mcap's writer closes
+a chunk only when it reaches its byte size and has no public way to close
+one earlier. Measured on 2026-11-26 (20,000 messages of 600 bytes, zstd, one
+process): 1.4-1.7 us per message here against 3.9-4.0 us with mcap's writer.
+Schema, channel and metadata records go to the file as soon as they are
+added, messages go into the open chunk, and :meth:`McapFile.close_chunk`
+writes the chunk (compressed, with its CRC and message indexes) and flushes
+it to the operating system.
 
 Layout (MCAP specification, version 0): magic; header; then schemas,
 channels, metadata records and chunks, each chunk followed by one message

@@ -69,10 +69,25 @@ def trim(data, typename: str) -> bytes:
     return bytes(memoryview(data)[:_decode(data, typename)[1]])
 
 
+#: Field defaults of the Jazzy definitions our messages use, which rosbags'
+#: generated text leaves out: ``geometry_msgs/Quaternion`` is the only type
+#: among them with defaults (checked against the .msg files of the Jazzy wheels).
+_DEFAULTS = {"geometry_msgs/Quaternion": {"x": "0", "y": "0", "z": "0", "w": "1"}}
+
+
 def msgdef(typename: str) -> str:
     """The ``ros2msg`` schema text of ``typename``: its definition, then every
-    type it uses after a ``MSG:`` separator line (the MCAP ROS 2 profile)."""
-    return TYPESTORE.generate_msgdef(typename, ros_version=2)[0]
+    type it uses after a ``MSG:`` separator line (the MCAP ROS 2 profile),
+    field defaults included (``float64 w 1`` of a Quaternion)."""
+    text = TYPESTORE.generate_msgdef(typename, ros_version=2)[0]
+    lines, current = [], "/".join(typename.split("/")[::2])
+    for line in text.split("\n"):
+        if line.startswith("MSG: "):
+            current = line[len("MSG: "):]
+        parts = line.split()
+        default = _DEFAULTS.get(current, {}).get(parts[1]) if len(parts) == 2 else None
+        lines.append(f"{line} {default}" if default is not None else line)
+    return "\n".join(lines)
 
 
 def type_hash(typename: str) -> str:

@@ -37,16 +37,18 @@ def tree_transforms(model, rotation, position):
     """Every tree joint's child link in its parent link's frame, as
     robot_state_publisher would broadcast them (frames = URDF link names).
 
-    ``rotation`` (nb, 3, 3) and ``position`` (nb, 3, m) are the body (centroid)
-    poses in ``world``. Returns ``(parent, child, R, p)``: body indices (k,),
-    rotations (k, 3, 3) and translations (k, 3, m), in ``model.joints`` order.
+    ``rotation`` (..., nb, 3, 3) and ``position`` (..., nb, 3, m) are the body
+    (centroid) poses in ``world`` (leading axes: samples). Returns ``(parent,
+    child, R, p)``: body indices (k,), rotations (..., k, 3, 3) and
+    translations (..., k, 3, m), in ``model.joints`` order.
     The recordings' ``/tf`` and the dynamics node's are made of these.
     """
     R, p = link_poses(model, rotation, position)
     pairs = [(model.hinges[h].body_a, model.hinges[h].body_b) for h in model.joints]
     a, b = np.array(pairs).T
-    R_rel = np.einsum("kji,kjl->kil", R[a], R[b])           # R_a^T R_b
-    p_rel = np.einsum("kji,kj->ki", R[a], p[b] - p[a])      # R_a^T (p_b - p_a)
+    Ra = R[..., a, :, :]
+    R_rel = np.einsum("...kji,...kjl->...kil", Ra, R[..., b, :, :])        # R_a^T R_b
+    p_rel = np.einsum("...kji,...kj->...ki", Ra, p[..., b, :] - p[..., a, :])  # R_a^T (p_b - p_a)
     return a, b, R_rel, p_rel
 
 

@@ -62,6 +62,10 @@ def test_package_xml_exec_depends_are_exactly_the_ros_imports():
     ros_depends = {e.text for e in root.findall("exec_depend") if not e.text.startswith("python3-")}
     imports = imported_top_modules([*(ROOT / "panel_deploy" / "nodes").glob("*.py"),
                                     *(ROOT / "launch").glob("*.py")])
+    # the nodes import the contract's message types by name (nodes.messages.message_class)
+    from panel_deploy import contract
+    imports |= {t.type.split("/")[0] for t in contract.TOPICS}
+    imports |= {s.type.split("/")[0] for s in contract.SERVICES}
     assert ros_depends == imports
 
 
@@ -94,3 +98,49 @@ def test_build_requires_are_the_run_time_requirements():
     # the build runs the package to compile its kernels (setup.py, BuildWithKernels)
     build = tomllib.loads((ROOT / "pyproject.toml").read_text())["build-system"]["requires"]
     assert sorted(r for r in build if not r.startswith("setuptools")) == sorted(_install_requires())
+
+
+def _module_graph():
+    """Top-level imports between the package's modules (a function's own imports,
+    taken when it runs, are not edges)."""
+    import networkx as nx
+
+    root = ROOT / "panel_deploy"
+
+    def name(path):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+    modules = {name(p): p for p in root.rglob("*.py")}
+    graph = nx.DiGraph()
+    for module, path in modules.items():
+        package = module if path.name == "__init__.py" else module.rsplit(".", 1)[0]
+        for node in ast.parse(path.read_text()).body:
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            base = package.split(".")[:len(package.split(".")) - node.level + 1] if node.level \
+                else []
+            source = ".".join(base + ([node.module] if node.module else []))
+            for alias in node.names:
+                target = f"{source}.{alias.name}"
+                target = target if target in modules else source
+                if target in modules and target != module:
+                    graph.add_edge(module, target)
+    return graph
+
+
+def test_no_import_cycles_and_data_flows_one_way():
+    import networkx as nx
+
+    graph = _module_graph()
+    assert graph.has_edge("panel_deploy.nodes.recorder", "panel_deploy.record.writer")  # it sees
+    assert list(nx.simple_cycles(graph)) == []
+    record = {m for m in graph if m.startswith("panel_deploy.record")}
+    nodes = [m for m in graph if m.startswith("panel_deploy.nodes")]
+    # the nodes reach the recording code through its writer only
+    assert {t for m in nodes for t in graph.successors(m) if t in record} <= \
+        {"panel_deploy.record.writer"}
+    # the core below the recording never imports it
+    for module in ("panel_deploy.model", "panel_deploy.scene", "panel_deploy.dynamics.simulate",
+                   "panel_deploy.collision.check", "panel_deploy.contract"):
+        assert not nx.descendants(graph, module) & record, module

@@ -12,6 +12,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hostile import file_size_limit, mcap_with_chunk
 
@@ -221,3 +222,38 @@ def test_two_recorders_of_one_file_leave_one_whole_recording(tmp_path):
     assert recording.truncated is None
     assert [msg.data for _, msg in recording.messages("/chatter")] == [f"first {j}" for j in range(50)]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["both.mcap"]
+
+
+def test_a_namespaced_ros2_bag_record_is_read_by_namespace(tmp_path, capsys):
+    """``ros2 bag record`` of two graphs (/array1, /array2): collide and replay need
+    --namespace to choose one, and then read that array's joint states."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    scene = load_scene(resolve_scene("paper_4x4"))
+    scene = scene.replace(simulation=replace(scene.simulation, t_end=0.6, samples=121))
+    model, result, report = simulate_scene(scene)
+    names = [model.hinges[h].name for h in model.joints]
+    bag = tmp_path / "two"
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = {ns: writer.add_connection(f"/{ns}/joint_states", m.JOINT_STATE,
+                                           typestore=m.TYPESTORE) for ns in ("array1", "array2")}
+        for t, angles in zip(result.t, result.theta):
+            for ns, conn in conns.items():
+                still = angles if ns == "array1" else model.theta_stowed  # array2 never moves
+                msg = m.joint_state(names, t, still, np.zeros(0), np.zeros(0))
+                writer.write(conn, round(t * 1e9), m.serialize(msg))
+    (mcap_file,) = bag.glob("*.mcap")
+    assert main(["collide", str(mcap_file), "--scene", "paper_4x4"]) == 2
+    err = capsys.readouterr().err
+    assert "joint states of several arrays (/array1, /array2): choose one with --namespace" in err
+    assert main(["collide", str(mcap_file), "--scene", "paper_4x4", "--namespace", "array1",
+                 "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["first_collision"]["pair"] == list(report.first_collision.names)
+    assert main(["collide", str(mcap_file), "--scene", "paper_4x4", "--namespace", "/array2",
+                 "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["collided"] is False
+    png = tmp_path / "a1.png"
+    assert main(["replay", str(mcap_file), "--scene", "paper_4x4", "--namespace", "array1",
+                 "--png", str(png), "--at", "0,0.3"]) == 0
+    assert png.stat().st_size > 10_000

@@ -1,4 +1,4 @@
-"""panel_deploy.record.messages and .cdr: message contents, CDR bytes, schemas and type hashes.
+"""panel_deploy.record.messages and contract.cdr: message contents, CDR bytes, schemas and type hashes.
 
 The fast per-sample encoder is checked byte for byte against rosbags'
 serializer; both are decoded by rclpy's own type support (the real ROS
@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from panel_deploy import frames
 from panel_deploy.frames import quaternions
 from panel_deploy.build import build_model
 from panel_deploy.model import hinge_order
@@ -21,8 +22,48 @@ from panel_deploy.export.urdf import link_poses
 from panel_deploy.kinematics import forward_kinematics
 from panel_deploy.dynamics.deployment import Sample
 from panel_deploy.record import messages as m
-from panel_deploy.record.cdr import SampleEncoder
+from panel_deploy.contract.cdr import SampleEncoder
 from panel_deploy.scene import load_scene, resolve_scene
+
+
+# Reference builders: the per-sample messages and /tf_static as rosbags messages, built
+# field by field from the same values, for the byte-for-byte check of contract.cdr.
+_T = m._T
+
+
+def clock(t: float):
+    return _T[m.CLOCK](clock=m.stamp(t))
+
+
+def panel_markers(model, rotation, position, t: float):
+    """Every panel as a CUBE of its true size (thickness included), frame ``world``;
+    ``rotation`` (nb, 3, 3) and ``position`` (nb, 3, m) are the body (centroid) poses."""
+    return _T[m.MARKER_ARRAY](markers=[
+        m._marker(t, "panels", b, body.size, q, position[b], m.PANEL_COLOUR, body.name)
+        for b, (body, q) in enumerate(zip(model.bodies, m._quaternions(rotation)))])
+
+
+def _transform(t, parent, child, q, p):
+    return _T["geometry_msgs/msg/TransformStamped"](
+        header=m._header(t, parent), child_frame_id=child,
+        transform=_T["geometry_msgs/msg/Transform"](translation=m._vector(p), rotation=q))
+
+
+def tf_message(model, rotation, position, t: float):
+    """``/tf`` at one sample (:func:`tree_transforms`)."""
+    a, b, R_rel, p_rel = frames.tree_transforms(model, rotation, position)
+    return _T[m.TF_MESSAGE](transforms=[
+        _transform(t, model.bodies[i].name, model.bodies[j].name, q, d)
+        for i, j, q, d in zip(a, b, m._quaternions(R_rel), p_rel)])
+
+
+def tf_static(model, t: float = 0.0):
+    """``/tf_static``: ``world`` -> the ground body's link (:func:`ground_transform`)."""
+    R, p = frames.ground_transform(model)
+    return _T[m.TF_MESSAGE](transforms=[_transform(t, m.WORLD, model.bodies[model.ground].name,
+                                                 m._quaternions(R[None])[0], p)])
+
+
 
 
 @pytest.fixture(scope="module")
@@ -55,20 +96,27 @@ def test_quaternions_match_scipy_up_to_sign():
 
 def test_encoder_bytes_equal_rosbags_serializer(model, names):
     samples = _samples(model, names)
-    encoded = SampleEncoder(model, names).encode(samples)
-    for s, (clock, joint_state, panels, tf) in zip(samples, encoded):
-        assert clock == m.serialize(m.clock(s.t))
+    encoder = SampleEncoder(model)
+    assert encoder.names == names
+    for s, (time, joint_state, panels, tf) in zip(samples, encoder.encode(samples)):
+        assert time == m.serialize(clock(s.t))
         assert joint_state == m.serialize(m.joint_state(names, s.t, s.theta, s.omega, s.torque))
-        assert panels == m.serialize(m.panel_markers(model, s.rotation, s.position, s.t))
-        assert tf == m.serialize(m.tf_message(model, s.rotation, s.position, s.t))
+        assert panels == m.serialize(panel_markers(model, s.rotation, s.position, s.t))
+        assert tf == m.serialize(tf_message(model, s.rotation, s.position, s.t))
+        assert tf == encoder.tf(s.rotation, s.position, s.t)
+    assert encoder.tf_static() == m.serialize(tf_static(model))
+    prefixed = SampleEncoder(model, "array1/")
+    assert prefixed.tf_static() != encoder.tf_static()
+    static = m.deserialize(prefixed.tf_static(), m.TF_MESSAGE).transforms[0]
+    assert (static.header.frame_id, static.child_frame_id) == ("array1/world", "array1/r1c2+r1c3")
 
 
 def test_tf_composes_to_the_link_poses(model, names):
     s = _samples(model, names, count=1, seed=4)[0]
     R, p = link_poses(model, s.rotation, s.position)
-    tf = m.tf_message(model, s.rotation, s.position, s.t)
+    tf = tf_message(model, s.rotation, s.position, s.t)
     names_of = [b.name for b in model.bodies]
-    static = m.tf_static(model).transforms[0]
+    static = tf_static(model).transforms[0]
     assert static.header.frame_id == "world" and static.child_frame_id == names_of[model.ground]
     world = {"world": (np.eye(3), np.zeros(3))}
     world[static.child_frame_id] = (np.eye(3), _xyz(static.transform.translation))
@@ -94,7 +142,7 @@ def _xyz(v):
 
 def test_panel_markers_are_cubes_of_the_true_size(model):
     R, p = forward_kinematics(model, model.theta_stowed)
-    markers = m.panel_markers(model, R, p, 0.25).markers
+    markers = panel_markers(model, R, p, 0.25).markers
     assert len(markers) == model.n_bodies
     for b, marker in enumerate(markers):
         assert marker.type == 1 and marker.header.frame_id == "world"  # CUBE
@@ -123,9 +171,9 @@ def test_schema_text_decodes_our_bytes(model, names, typename):
 
     s = _samples(model, names, count=1, seed=1)[0]
     built = {m.STRING: m.string("<robot/>"), m.JOINT_STATE: m.joint_state(names, s.t, s.theta, s.omega, s.torque),
-             m.MARKER_ARRAY: m.panel_markers(model, s.rotation, s.position, s.t),
+             m.MARKER_ARRAY: panel_markers(model, s.rotation, s.position, s.t),
              m.DIAGNOSTIC_ARRAY: m.diagnostics(s.t, m.status("x", m.WARN, "text", {"a": 1.5, "b": None})),
-             m.CLOCK: m.clock(s.t), m.TF_MESSAGE: m.tf_message(model, s.rotation, s.position, s.t)}
+             m.CLOCK: clock(s.t), m.TF_MESSAGE: tf_message(model, s.rotation, s.position, s.t)}
     schema = Schema(id=1, name=typename, encoding="ros2msg", data=m.msgdef(typename).encode())
     decoded = DecoderFactory().decoder_for("cdr", schema)(m.serialize(built[typename]))
     if typename == m.JOINT_STATE:
@@ -146,7 +194,7 @@ def test_rclpy_deserializes_what_we_encode(model, names):
     from visualization_msgs.msg import MarkerArray
 
     s = _samples(model, names, count=1, seed=2)[0]
-    clock, joint_state, panels, _ = SampleEncoder(model, names).encode([s])[0]
+    clock, joint_state, panels, _ = SampleEncoder(model).encode([s])[0]
     js = deserialize_message(joint_state, JointState)
     assert list(js.name) == names and np.array_equal(js.position, s.theta)
     assert np.array_equal(js.velocity, s.omega) and np.array_equal(js.effort, s.torque)

@@ -120,7 +120,7 @@ def link_poses(model: Model, rotation, position) -> tuple[np.ndarray, np.ndarray
     p = np.asarray(position, dtype=float)
     flat = np.array([b.flat_position for b in model.bodies], dtype=float).reshape(-1, 3)
     offset = link_origin(model) - flat
-    return R, p + np.einsum("bij,bj->bi", R, offset)
+    return R, p + np.einsum("...bij,bj->...bi", R, offset)
 
 
 def _comment(text: str) -> str:

@@ -25,6 +25,7 @@ from dataclasses import fields
 from rclpy.parameter import Parameter
 
 from .. import contract
+from ..contract.cdr import SampleEncoder
 from ..errors import PanelDeployError, shown
 from ..dynamics.deployment import Deployment
 from ..configure import DynamicsParameters, configure
@@ -118,27 +119,22 @@ class DynamicsNode(runtime.WorkerNode):
     def _run(self, deployment, scene, params, prefix=""):
         model = deployment.model
         pacer = Pacer(params.real_time_factor, deployment.stopping)
-        panels, shown, tf = None, -math.inf, None
+        # The contract's own bytes, as recordings store them: published as they are.
+        encoder = SampleEncoder(model, prefix)
+        shown = -math.inf
         if self.tf_static is not None:
-            self.tf_static.publish(messages.tf_static(model, prefix))
+            self.tf_static.publish(encoder.tf_static())
         start = time.monotonic()
         for s in deployment:
             pacer.wait(s.t)
-            self.clock.publish(messages.clock(s.t))
-            self.joint_states.publish(messages.joint_state(deployment.names, s.t, s.theta,
-                                                           s.omega, s.torque))
-            if self.tf is not None:  # every sample: 0.1 ms each (16 panels)
-                tf = (messages.tf(model, s.rotation, s.position, s.t, prefix) if tf is None else
-                      messages.move_tf(tf, model, s.rotation, s.position, s.t))
+            (clock, joint_state, panels, tf), = encoder.encode([s])
+            self.clock.publish(clock)
+            self.joint_states.publish(joint_state)
+            if self.tf is not None:
                 self.tf.publish(tf)
-            # Markers are for eyes: a display rate is enough, and filling them
-            # at every sample took 2.6x the integration's time.
+            # Markers are for eyes: a display rate is enough.
             now = time.monotonic()
             if now - shown >= 1.0 / PANEL_RATE or s.t >= deployment.settings.t_end:
-                panels = (messages.panel_markers(model, s.rotation, s.position, s.t,
-                                                 prefix + messages.FRAME)
-                          if panels is None else
-                          messages.move_markers(panels, s.rotation, s.position, s.t))
                 self.panels.publish(panels)
                 shown = now
         published = time.monotonic() - start

@@ -13,18 +13,16 @@ from importlib import import_module
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point, Pose, Quaternion, TransformStamped, Vector3
+from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from .. import contract
-from ..contract import HIT_COLOUR, PANEL_COLOUR, event_fields
+from ..contract import HIT_COLOUR, event_fields
 from ..errors import TrajectoryError, shown
-from ..frames import ground_transform, quaternions, tree_transforms
 
 try:  # tf2_msgs has no wheel on PyPI: ``pip install ./vendor/tf2_msgs`` builds it
     from tf2_msgs.msg import TFMessage
@@ -60,10 +58,6 @@ def seconds(time: Time) -> float:
 
 def string(text: str) -> String:
     return String(data=text)
-
-
-def clock(t: float) -> Clock:
-    return Clock(clock=stamp(t))
 
 
 def joint_state(names, t, theta, omega, torque) -> JointState:
@@ -130,71 +124,6 @@ def _box(model, body, rotation, position, t, ns, colour, frame=FRAME) -> Marker:
     m.color = ColorRGBA(r=colour[0], g=colour[1], b=colour[2], a=colour[3])
     m.text = model.bodies[body].name
     return m
-
-
-def panel_markers(model, rotation, position, t, frame=FRAME) -> MarkerArray:
-    """Every panel as a box of its true size (thickness included), frame ``world``
-    (or ``frame``: the dynamics node's ``frame_prefix`` + ``world``)."""
-    return MarkerArray(markers=[_box(model, b, rotation, position, t, "panels", PANEL_COLOUR,
-                                     frame) for b in range(model.n_bodies)])
-
-
-def move_markers(markers: MarkerArray, rotation, position, t) -> MarkerArray:
-    """``markers`` of :func:`panel_markers`, moved in place to new poses at ``t``.
-
-    Filling a message costs far more than changing it (rclpy checks every
-    field on construction): a stream moves one array instead.
-    """
-    quaternions = Rotation.from_matrix(rotation).as_quat()
-    time = stamp(t)
-    for m, q, p in zip(markers.markers, quaternions.tolist(), position.tolist()):
-        m.header.stamp = time
-        o, x = m.pose.orientation, m.pose.position
-        o.x, o.y, o.z, o.w = q
-        x.x, x.y, x.z = p
-    return markers
-
-
-def _transform(time: Time, parent: str, child: str, q, p) -> TransformStamped:
-    msg = TransformStamped()
-    msg.header.stamp, msg.header.frame_id, msg.child_frame_id = time, parent, child
-    tr, r = msg.transform.translation, msg.transform.rotation
-    tr.x, tr.y, tr.z = map(float, p)
-    r.x, r.y, r.z, r.w = map(float, q)
-    return msg
-
-
-def tf(model, rotation, position, t, prefix: str = ""):
-    """``/tf`` at one sample: every tree joint's child link in its parent link's
-    frame (``record.messages.tree_transforms``, as recordings carry it), frames
-    ``prefix`` + the URDF link names. Needs tf2_msgs (:data:`TFMessage` not None)."""
-    parent, child, R, p = tree_transforms(model, rotation, position)
-    time, names = stamp(t), [prefix + b.name for b in model.bodies]
-    return TFMessage(transforms=[_transform(time, names[i], names[j], q, d) for i, j, q, d
-                                 in zip(parent.tolist(), child.tolist(), quaternions(R).tolist(),
-                                        p.tolist())])
-
-
-def move_tf(msg, model, rotation, position, t):
-    """``msg`` of :func:`tf` for ``model``, moved in place to new poses at ``t``
-    (a third of the time of a new message: 0.1 ms for 11 joints)."""
-    _, _, R, p = tree_transforms(model, rotation, position)
-    time = stamp(t)
-    for m, q, d in zip(msg.transforms, quaternions(R).tolist(), p.tolist()):
-        m.header.stamp = time
-        tr, r = m.transform.translation, m.transform.rotation
-        tr.x, tr.y, tr.z = d
-        r.x, r.y, r.z, r.w = q
-    return msg
-
-
-def tf_static(model, prefix: str = ""):
-    """``/tf_static``: ``prefix`` + ``world`` -> the ground body's link (the URDF's
-    fixed joint), stamped 0."""
-    R, p = ground_transform(model)
-    return TFMessage(transforms=[_transform(stamp(0.0), prefix + FRAME,
-                                            prefix + model.bodies[model.ground].name,
-                                            quaternions(R[None])[0].tolist(), p.tolist())])
 
 
 def collision_markers(model, event, rotation, position) -> MarkerArray:

@@ -19,6 +19,7 @@ metadata record.
 from __future__ import annotations
 
 from .. import contract
+from ..contract.cdr import SampleEncoder
 from ..collision import CollisionSettings, StreamCheck
 from ..dynamics.deployment import Deployment
 from ..export.urdf import model_urdf
@@ -26,7 +27,6 @@ from ..kinematics import forward_kinematics
 from ..scene_text import scene_yaml
 from ..summary import deployment_summary
 from . import messages as m
-from .cdr import SampleEncoder
 from .writer import DeploymentWriter
 
 #: Samples encoded together (vectorised poses): 50 ms of simulated time at 200 Hz.
@@ -62,7 +62,7 @@ def record_deployment(path, scene, model):
         deployment = Deployment(model, sim)
         check = StreamCheck(model, settings)
         n = model.n_coords
-        encoder = SampleEncoder(model, check.names)
+        encoder = SampleEncoder(model)
         for batch in _batches(deployment, BATCH):
             for s, (clock, joint_state, panels, tf) in zip(batch, encoder.encode(batch)):
                 ns = m.nanoseconds(s.t)

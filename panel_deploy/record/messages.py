@@ -16,9 +16,10 @@ import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
 from .. import contract
+from ..contract import nanoseconds
 from ..contract import (CLOCK, DIAGNOSTIC_ARRAY, ERROR, JOINT_STATE, MARKER_ARRAY,  # noqa: F401
                         HIT_COLOUR, OK, PANEL_COLOUR, STRING, TF_MESSAGE, WARN, WORLD, event_fields)
-from ..frames import ground_transform, quaternions, tree_transforms
+from ..frames import quaternions
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 _T = TYPESTORE.types
@@ -95,11 +96,6 @@ def type_hash(typename: str) -> str:
     return TYPESTORE.hash_rihs01(typename)
 
 
-def nanoseconds(t: float) -> int:
-    """``t`` seconds as integer nanoseconds (the MCAP log time and ROS stamp resolution)."""
-    return round(t * 1e9)
-
-
 def stamp(t: float):
     """``builtin_interfaces/Time`` of ``t`` s (>= 0)."""
     ns = nanoseconds(t)
@@ -117,10 +113,6 @@ def _header(t: float, frame: str = ""):
 
 def string(text: str):
     return _T[STRING](data=text)
-
-
-def clock(t: float):
-    return _T[CLOCK](clock=stamp(t))
 
 
 def joint_state(names, t: float, theta, omega, torque):
@@ -160,14 +152,6 @@ def _marker(t, ns, index, size, q, p, colour, text="", kind=1):
         mesh_use_embedded_materials=False)
 
 
-def panel_markers(model, rotation, position, t: float):
-    """Every panel as a CUBE of its true size (thickness included), frame ``world``;
-    ``rotation`` (nb, 3, 3) and ``position`` (nb, 3, m) are the body (centroid) poses."""
-    return _T[MARKER_ARRAY](markers=[
-        _marker(t, "panels", b, body.size, q, position[b], PANEL_COLOUR, body.name)
-        for b, (body, q) in enumerate(zip(model.bodies, _quaternions(rotation)))])
-
-
 def collision_markers(model, event, rotation, position):
     """The colliding pair of ``event`` in red at the instant of the event, and
     its contact point (a yellow 10 mm sphere), as the collision monitor sends them."""
@@ -178,27 +162,6 @@ def collision_markers(model, event, rotation, position):
                   model.bodies[b].name) for b in event.bodies),
         _marker(event.t, "collision_point", 0, (0.01, 0.01, 0.01), unit, event.point,
                 (1.0, 1.0, 0.0, 1.0), kind=2)])
-
-
-def _transform(t, parent, child, q, p):
-    return _T["geometry_msgs/msg/TransformStamped"](
-        header=_header(t, parent), child_frame_id=child,
-        transform=_T["geometry_msgs/msg/Transform"](translation=_vector(p), rotation=q))
-
-
-def tf_message(model, rotation, position, t: float):
-    """``/tf`` at one sample (:func:`tree_transforms`)."""
-    a, b, R_rel, p_rel = tree_transforms(model, rotation, position)
-    return _T[TF_MESSAGE](transforms=[
-        _transform(t, model.bodies[i].name, model.bodies[j].name, q, d)
-        for i, j, q, d in zip(a, b, _quaternions(R_rel), p_rel)])
-
-
-def tf_static(model, t: float = 0.0):
-    """``/tf_static``: ``world`` -> the ground body's link (:func:`ground_transform`)."""
-    R, p = ground_transform(model)
-    return _T[TF_MESSAGE](transforms=[_transform(t, WORLD, model.bodies[model.ground].name,
-                                                 _quaternions(R[None])[0], p)])
 
 
 def status(name: str, level: int, message: str, values: dict | None = None,

@@ -41,6 +41,7 @@ import yaml
 
 from .. import __version__, contract
 from ..build import build_model
+from ..contract.cdr import SampleEncoder
 from ..errors import PanelDeployError, TrajectoryError
 from ..kinematics import forward_kinematics
 from ..scene_text import scene_from_yaml
@@ -387,7 +388,8 @@ class DeploymentWriter:
         self.file.metadata("model", model_record(model))
         self.file.metadata("integrator", integrator_record(scene))
         self.write(contract.DEPLOYED_SCENE, messages.string(text))
-        self.write(contract.TF_STATIC, messages.tf_static(model))
+        self._encoder = SampleEncoder(model)
+        self.write(contract.TF_STATIC, self._encoder.tf_static())
 
     def receive(self, topic: contract.Topic, data) -> None:
         """Record CDR bytes received on ``topic`` from a live graph.
@@ -424,7 +426,7 @@ class DeploymentWriter:
         except KeyError:
             return  # not this model's joint states: recorded, but no /tf for them
         R, p = forward_kinematics(model, theta)[:2]
-        self.write(contract.TF, messages.tf_message(model, R, p, stamp * 1e-9), stamp)
+        self.write(contract.TF, self._encoder.tf(R, p, stamp * 1e-9), stamp)
 
     def close(self, summary: dict | None = None) -> None:
         """Write the ``outcome`` record of a deployment summary (if given) and

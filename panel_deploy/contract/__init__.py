@@ -15,6 +15,9 @@ run with ``--namespace array7``); a leading ``/`` marks a global topic, as
 ROS's own ``/diagnostics``, ``/clock``, ``/tf`` and ``/tf_static`` are. A
 recording keeps the resolved (namespaced) names.
 
+:mod:`.cdr` builds the messages a deployment sends at every sample (and
+``/tf_static``) as the bytes the dynamics node publishes and recordings store.
+
 Frames: ``world`` is the ground frame (the flat array frame of the ground
 panel); every body's link frame is named after the body (``r1c2+r1c3``). The
 dynamics node's ``frame_prefix`` parameter puts a prefix before every frame.
@@ -136,6 +139,11 @@ SERVICES = (RELOAD, DEPLOY, STOP, RESET, OPTIMISE, CANCEL)
 
 #: Node names of the suite.
 NODES = ("array_model", "dynamics", "collision_monitor", "optimiser")
+
+
+def nanoseconds(t: float) -> int:
+    """``t`` seconds as integer nanoseconds (stamps and MCAP log times)."""
+    return round(t * 1e9)
 
 
 def resolve(name: str, namespace: str = "") -> str:

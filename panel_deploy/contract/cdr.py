@@ -1,4 +1,6 @@
-"""Fast CDR encoding of the four messages a recording writes at every sample.
+"""The wire form of the four messages a deployment sends at every sample, and of
+``/tf_static``: the one place they are built, for the dynamics node (which
+publishes these bytes as they are) and for recordings alike.
 
 For one model the byte layout of ``/joint_states``, ``/panel_deploy/panels``,
 ``/tf`` and ``/clock`` never changes from sample to sample (same names, same
@@ -9,7 +11,10 @@ field-by-field serializer, which costs more than the simulation it records
 (measured 2026-11-26 on the paper scene: 48 us per sample for the four
 messages here, 528 us with rosbags building and serializing them, 11x).
 The bytes equal ``rosbags``' ``serialize_cdr`` of the messages that
-:mod:`.messages` builds from the same values (the tests check it).
+:mod:`panel_deploy.record.messages` builds from the same values, and rclpy
+decodes them (the tests check both). Frames are the URDF's link names and
+``world``, after an optional prefix (the dynamics node's ``frame_prefix``);
+the poses of ``/tf`` are :func:`panel_deploy.frames.tree_transforms`.
 
 CDR as ROS 2 writes it: the 4-byte encapsulation header ``00 01 00 00``
 (CDR, little endian), then the fields in definition order, each primitive
@@ -24,10 +29,9 @@ import struct
 
 import numpy as np
 
-from ..export.urdf import link_origin
-from ..contract import PANEL_COLOUR, WORLD
-from ..frames import quaternions
-from .messages import nanoseconds
+from ..frames import ground_transform, quaternions, tree_transforms
+from ..model import hinge_order
+from . import PANEL_COLOUR, WORLD, nanoseconds
 
 ENCAPSULATION = b"\x00\x01\x00\x00"
 
@@ -123,12 +127,20 @@ class SampleEncoder:
     Parameters
     ----------
     model : Model
+    prefix : str
+        Put before every frame name (``array1/``); empty for none.
+
+    Attributes
+    ----------
     names : list of str
-        The joint names of ``/joint_states``, in order (every hinge).
+        The joint names of ``/joint_states``, in order: every hinge, tree
+        coordinates first, then the cut hinges (:func:`~panel_deploy.model.hinge_order`).
     """
 
-    def __init__(self, model, names):
+    def __init__(self, model, prefix: str = ""):
         self.model = model
+        self.prefix = prefix
+        self.names = names = [model.hinges[h].name for h in hinge_order(model)]
         self._clock = Layout()
         self._clock.time()
         self._clock.compile()
@@ -145,7 +157,7 @@ class SampleEncoder:
         panels = Layout()
         panels.uint32(model.n_bodies)
         for b, body in enumerate(model.bodies):
-            panels.header(WORLD)
+            panels.header(prefix + WORLD)
             panels.string("panels")
             panels.int32(b)
             panels.int32(1)      # CUBE
@@ -174,39 +186,36 @@ class SampleEncoder:
             panels.empty_sequence()
             panels.boolean(False)  # mesh_use_embedded_materials
         self._panels = panels.compile()
+        self._tf = self._transforms([(model.hinges[h].body_a, model.hinges[h].body_b)
+                                     for h in model.joints])
 
-        pairs = [(model.hinges[h].body_a, model.hinges[h].body_b) for h in model.joints]
-        self._a = np.array([a for a, _ in pairs], dtype=int)
-        self._b = np.array([b for _, b in pairs], dtype=int)
-        # Link frame origin minus centroid, body axes (see panel_deploy.export.urdf.link_poses).
-        self._offset = link_origin(model) - np.array([b.flat_position for b in model.bodies])
+    def _transforms(self, pairs) -> Layout:
+        """A TFMessage of one transform per (parent, child) body pair (-1: ``world``)."""
+        frame = [self.prefix + b.name for b in self.model.bodies]
         tf = Layout()
         tf.uint32(len(pairs))
         for a, b in pairs:
-            tf.header(model.bodies[a].name)
-            tf.string(model.bodies[b].name)
+            tf.header(self.prefix + WORLD if a < 0 else frame[a])
+            tf.string(frame[b])
             for _ in range(7):   # translation x y z, rotation x y z w
                 tf.float64()
-        self._tf = tf.compile()
+        return tf.compile()
 
     def encode(self, samples) -> list:
         """``(clock, joint_state, panels, tf)`` bytes of every sample, a
         :class:`~panel_deploy.dynamics.deployment.Sample` (or any object with its fields).
 
-        ``theta``, ``omega``, ``torque``: every joint in ``names`` order (rad,
-        rad/s, N m); ``rotation`` (nb, 3, 3) and ``position`` (nb, 3, m): the
-        body (centroid) poses in ``world``. The panels are CUBEs at the body
-        poses; ``/tf`` gives every tree joint's child link in its parent
-        link's frame (as :func:`.messages.tf_message`). Samples are encoded
-        together: one vectorised pose and quaternion computation for all.
+        ``theta``, ``omega``, ``torque``: every joint in :attr:`names` order
+        (rad, rad/s, N m); ``rotation`` (nb, 3, 3) and ``position`` (nb, 3,
+        m): the body (centroid) poses in ``world``. The panels are CUBEs at
+        the body poses; ``/tf`` gives every tree joint's child link in its
+        parent link's frame. Samples are encoded together: one vectorised
+        pose and quaternion computation for all.
         """
         k, nb = len(samples), self.model.n_bodies
         R = np.array([s.rotation for s in samples], dtype=float)          # (k, nb, 3, 3)
         c = np.array([s.position for s in samples], dtype=float)          # (k, nb, 3)
-        p = c + np.einsum("kbij,bj->kbi", R, self._offset)                # link origins
-        Ra = R[:, self._a]
-        R_rel = np.einsum("kmji,kmjl->kmil", Ra, R[:, self._b])           # R_a^T R_b
-        p_rel = np.einsum("kmji,kmj->kmi", Ra, p[:, self._b] - p[:, self._a])
+        _, _, R_rel, p_rel = tree_transforms(self.model, R, c)
         q = quaternions(np.concatenate([R, R_rel], axis=1).reshape(-1, 3, 3))
         q = q.reshape(k, -1, 4).tolist()
         c, p_rel = c.tolist(), p_rel.tolist()
@@ -224,3 +233,18 @@ class SampleEncoder:
             out.append((self._clock.pack(stamp), self._joint_state.pack(js),
                         self._panels.pack(panels), self._tf.pack(tf)))
         return out
+
+    def tf(self, rotation, position, t: float) -> bytes:
+        """``/tf`` bytes of one sample's body poses (as :meth:`encode` makes them)."""
+        _, _, R_rel, p_rel = tree_transforms(self.model, rotation, position)
+        stamp = _stamp(t)
+        values = []
+        for xyz, quat in zip(p_rel.tolist(), quaternions(R_rel).tolist()):
+            values += (*stamp, *xyz, *quat)
+        return self._tf.pack(values)
+
+    def tf_static(self) -> bytes:
+        """``/tf_static``: ``world`` -> the ground body's link (the URDF's fixed joint), stamped 0."""
+        R, p = ground_transform(self.model)
+        layout = self._transforms([(-1, self.model.ground)])
+        return layout.pack((0, 0, *p.tolist(), *quaternions(R[None])[0].tolist()))

@@ -193,6 +193,9 @@ def check_output_path(path, flag: str) -> Path | None:
 
 
 def _check_writable(p: Path, text: str, flag: str) -> None:
+    if is_stdout(text):
+        return  # written in place, where the shell or pipe reads
+    p = output_target(p)
     if p.is_dir() or text.endswith(("/", os.sep)):
         raise SceneError(flag, f"{text} is a folder; give a file name")
     parent = p.parent
@@ -239,11 +242,43 @@ def _umask() -> int:
     return mask
 
 
+#: Longest file name (bytes) of the file systems we write to.
+NAME_MAX = 255
+
+#: The output name that means standard output.
+STDOUT = "-"
+
+
+def is_stdout(path) -> bool:
+    """Whether writing ``path`` writes this process's standard output: ``-``,
+    ``/dev/stdout``, or any name (a link to ``/proc/self/fd/1``, the file the
+    shell redirected to) of the file or pipe that standard output is."""
+    if str(path) == STDOUT:
+        return True
+    try:
+        here, out = os.stat(path), os.fstat(1)
+    except (OSError, ValueError):
+        return False
+    return (here.st_dev, here.st_ino) == (out.st_dev, out.st_ino)
+
+
 def in_place(path) -> bool:
-    """Whether ``path`` is a device or a pipe (``/dev/null``, ``/dev/full``, a FIFO),
-    written in place: renaming a file over it would replace the device itself."""
+    """Whether ``path`` is written in place: a device or a pipe (``/dev/null``,
+    ``/dev/full``, a FIFO), where renaming a file over it would replace the
+    device itself, or standard output (:func:`is_stdout`), which a shell or a
+    pipe reads from the descriptor it holds."""
     path = Path(path)
-    return path.exists() and not path.is_file()
+    return is_stdout(path) or (path.exists() and not path.is_file())
+
+
+def output_target(path) -> Path:
+    """Where an output named ``path`` goes: the file a link points to (a link is
+    written through, never replaced by a file), ``/dev/stdout`` for ``-``."""
+    if str(path) == STDOUT:
+        return Path("/dev/stdout")
+    path = Path(path)
+    # A link to a device, a pipe or standard output is written in place, through it.
+    return Path(os.path.realpath(path)) if path.is_symlink() and not in_place(path) else path
 
 
 def temporary_beside(path, prefix: str, suffix: str) -> tuple[int, str]:
@@ -252,6 +287,11 @@ def temporary_beside(path, prefix: str, suffix: str) -> tuple[int, str]:
     written there and renamed over ``path`` at the end, it replaces ``path``
     at once, or not at all."""
     folder = Path(path).parent if str(Path(path).parent) else Path(".")
+    # A name the file system takes (255 bytes) must not fail for its affixes:
+    # the prefix gives way (mkstemp adds 8 characters).
+    room = NAME_MAX - 8 - len(suffix.encode())
+    while len(prefix.encode()) > room:
+        prefix = prefix[:-1]
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=prefix, suffix=suffix)
     os.fchmod(fd, 0o666 & ~_umask())
     return fd, tmp
@@ -273,7 +313,7 @@ def write_atomic(path, write, flag: str = "output", mode: str = "w") -> Path:
     :class:`PanelDeployError` names ``flag``, the reason and where the content
     is, so nothing computed is lost; a fallback file that fails too is removed.
     """
-    path = Path(path)
+    path = output_target(path)
     text = {} if "b" in mode else {"encoding": "utf-8"}
     tmp = None
     try:

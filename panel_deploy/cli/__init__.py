@@ -11,6 +11,7 @@ checked before any work starts (:mod:`panel_deploy.cli.checks`).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import sys
@@ -254,7 +255,11 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
         from .checks import check_args
         check_args(args)  # every flag and output path, before any work
-        code = args.func(args) or 0
+        if args.stdout_output is None:
+            code = args.func(args) or 0
+        else:  # a binary streams to standard output: every human line goes to stderr
+            with contextlib.redirect_stdout(sys.stderr):
+                code = args.func(args) or 0
         if interrupts.received and not interrupts.raised:
             # deferred to the end of the command (kernels loading up to its last moment)
             raise KeyboardInterrupt

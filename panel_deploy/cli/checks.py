@@ -17,7 +17,7 @@ import os
 from pathlib import Path
 
 from ..errors import SceneError, shown
-from ..validate import check_output_path, finite_number, in_place
+from ..validate import check_output_path, finite_number, in_place, is_stdout
 
 #: Largest array ``fold --rows R --cols C`` counts: the frontier count's time
 #: and memory grow about 3-4 fold per cell of the shorter side (12 x 12:
@@ -63,9 +63,16 @@ def check_args(args) -> None:
               for attr, flag in INPUTS.get(command, ())
               if (path := getattr(args, attr, None)) is not None]
     earlier = []
+    args.stdout_output = None  # the flag writing standard output: human lines go to stderr
     for path, flag in outputs:
         check_output_path(path, flag)
         if path is None:
+            continue
+        if is_stdout(path):
+            if args.stdout_output is not None:
+                raise SceneError(flag, f"standard output is also {args.stdout_output}: one output "
+                                       "can stream there")
+            args.stdout_output = flag
             continue
         for other, other_flag in inputs:
             if _same_file(path, other):

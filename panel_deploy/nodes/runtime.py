@@ -261,13 +261,66 @@ def start(argv=None) -> threading.Event:
     return stop
 
 
+def _ros_args_error(e) -> str:
+    """One line of rcl's refusal of the command line's ``--ros-args`` (a remap
+    rule it cannot parse, a name that is no ROS name): rclpy's message runs to
+    several lines with a caret and rcl's source positions."""
+    text = str(e).replace("failed to initialize rcl: ", "")
+    return _printable(text.split(". Error:")[0].split(", at /")[0].splitlines()[0])
+
+
+def _printable(text: str, limit: int = 160) -> str:
+    """``text`` on one line (control characters escaped), at most ``limit`` characters."""
+    text = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _check_remaps(argv) -> None:
+    """The node's name and namespace remaps (``-r __ns:=/array1``, ``-r __node:=x``)
+    checked as ROS names before rcl parses them (rcl logs its own lines first)."""
+    from rclpy.validate_namespace import validate_namespace
+    from rclpy.validate_node_name import validate_node_name
+
+    args = list(argv)
+    for i, arg in enumerate(args[:-1]):
+        if arg not in ("-r", "--remap"):
+            continue
+        rule = args[i + 1].split(":", 1)[1] if args[i + 1].count(":=") and \
+            args[i + 1].split(":=")[0].count(":") else args[i + 1]
+        key, _, value = rule.partition(":=")
+        check = {"__ns": validate_namespace, "__node": validate_node_name}.get(key)
+        if check is None:
+            continue
+        try:
+            check(value)
+        except Exception as e:  # rclpy's message is three lines with a caret
+            reason = str(e).splitlines()[0].split(": ", 1)[-1].rstrip(":")
+            raise SceneError("--ros-args", f"-r {_printable(args[i + 1])}: {reason}") from None
+
+
 def node_main(make_node, argv=None) -> int:
     """Body of a node executable: start, build the node, spin until a signal; exit code."""
-    stop = start(argv)
+    from rclpy.exceptions import InvalidNamespaceException, InvalidNodeNameException
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+
+    refused = (rclpy_implementation.RCLError, InvalidNamespaceException, InvalidNodeNameException)
+    try:
+        _check_remaps(sys.argv if argv is None else argv)
+        stop = start(argv)
+    except PanelDeployError as e:
+        print(f"panel-deploy: error: {e}", file=sys.stderr)
+        return 2
+    except refused as e:
+        print(f"panel-deploy: error: --ros-args: {_ros_args_error(e)}", file=sys.stderr)
+        return 2
     try:
         node = make_node()
     except PanelDeployError as e:
         print(f"panel-deploy: error: {e}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    except refused as e:
+        print(f"panel-deploy: error: --ros-args: {_ros_args_error(e)}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
     try:

@@ -45,7 +45,7 @@ from ..contract.cdr import SampleEncoder
 from ..errors import PanelDeployError, TrajectoryError
 from ..kinematics import forward_kinematics
 from ..scene_text import scene_from_yaml
-from ..validate import in_place, temporary_beside
+from ..validate import in_place, output_target, temporary_beside
 from . import messages
 from .mcap_file import McapFile
 
@@ -97,7 +97,7 @@ class Recorder:
     """
 
     def __init__(self, path, *, chunk_span: float = 0.25, chunk_bytes: int = 4 << 20):
-        self.path = Path(path)
+        self.path = output_target(path)
         self.chunk_span = chunk_span
         self.chunk_bytes = chunk_bytes
         #: Where the recording is written until :meth:`close` renames it to

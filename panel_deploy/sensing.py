@@ -162,20 +162,27 @@ class LoopSolver:
         theta = np.empty(n)
         theta[self.known] = theta_known
         cut_target = np.asarray(cut_theta, dtype=float)
-        x = self._guess.copy()
-        theta[self.missing] = x
-        # The chord method: one Jacobian per sample, the previous solution's,
-        # is enough for the small steps between samples.
-        J = self._J if self._J is not None else self._jacobian(theta, cut_target)[0]
-        for _ in range(MAX_STEPS):
-            step = np.linalg.lstsq(J, -self._residual(theta, cut_target), rcond=None)[0]
-            x += step
+        # The chord method from the previous solution: one Jacobian per sample is
+        # enough for the small steps between samples. A jump (a new deployment,
+        # a gap) gets Newton's method from the stowed angles instead.
+        stowed = np.asarray(self.model.theta_stowed, dtype=float)[self.missing]
+        for x, chord in ((self._guess.copy(), self._J), (stowed, None)):
             theta[self.missing] = x
-            if not np.abs(step).max() > STEP_TOL:
+            J = chord
+            for _ in range(MAX_STEPS):
+                if chord is None or J is None:
+                    J = self._jacobian(theta, cut_target)[0]
+                with np.errstate(all="ignore"):
+                    step = np.linalg.lstsq(J, -self._residual(theta, cut_target), rcond=None)[0]
+                x += step
+                theta[self.missing] = x
+                if not np.abs(step).max() > STEP_TOL:
+                    break
+            # At the solution: the rates need it exact, and it is the next sample's chord.
+            J, r0 = self._jacobian(theta, cut_target)
+            gap = float(np.abs(r0[:6 * len(self.model.cut_hinges)]).max(initial=0.0))
+            if np.all(np.isfinite(x)) and gap <= GAP_LIMIT:
                 break
-        # At the solution: the rates need it exact, and it is the next sample's chord.
-        J, r0 = self._jacobian(theta, cut_target)
-        gap = float(np.abs(r0[:6 * len(self.model.cut_hinges)]).max(initial=0.0))
         if not np.all(np.isfinite(x)) or gap > GAP_LIMIT:
             raise TrajectoryError(f"position: the carried angles leave the loop open by "
                                   f"{gap * 1e3:.3g} mm; cannot solve for "

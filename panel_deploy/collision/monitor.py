@@ -85,6 +85,19 @@ interpolated (a cubic through noise says nothing between the samples), so
 collisions are found at the samples: the time is the sample's, ``refined``
 False, ``contact_time`` None. The detection comes later by about
 depth_p / approach speed than in a clean stream.
+
+Receipt timing
+--------------
+With ``stamps`` "receipt" a sample's time is when it arrived (the
+middleware's source or receive time; a recording's log time), not when it
+was measured: the angles are true, their times carry the transport's jitter
+(on a loaded machine 1 ms typical, tens of ms at worst). Jitter is no
+motion, so nothing is interpolated between such samples (a cubic through
+jittered times invents speeds): a pair collides only at a sample whose
+measured configuration interferes deeper than the tolerance, which timing
+cannot fake. What receipt timing cannot give: the instant of a collision
+better than the arrival interval, and an approach speed (Eq. 7) better than
+jitter / ``speed_interval`` relative.
 """
 
 from __future__ import annotations
@@ -139,6 +152,10 @@ class CollisionSettings:
     speed_interval : float
         Spacing of the two distances of Eq. (7), s; 0: the stream's own
         samples (module docstring, "Approach speed").
+    stamps : str
+        "header" (a sample's time is when it was measured) or "receipt" (when
+        it arrived: nothing is interpolated between samples; module
+        docstring, "Receipt timing").
     """
 
     tolerance: float = 1.0e-4
@@ -148,6 +165,7 @@ class CollisionSettings:
     margin: float = COLLISION_MARGIN
     noise: float = 0.0
     speed_interval: float = 0.0
+    stamps: str = "header"
 
     def __post_init__(self):
         for f in ("tolerance", "resolution", "time_resolution", "margin", "noise", "speed_interval"):
@@ -392,7 +410,7 @@ class CollisionMonitor:
         colliding = D < -tol
         if noisy:
             found, colliding = self._noisy(prev, cur)
-        elif prev is not None and self.collision.refine:
+        elif prev is not None and self.collision.refine and self.collision.stamps == "header":
             found = self._refine(prev, cur)
         else:
             found = {int(k): (t, None) for k in np.flatnonzero(colliding & ~self.colliding)}

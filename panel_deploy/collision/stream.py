@@ -180,7 +180,9 @@ class StreamCheck:
                   "t": self._last - self.origin, "samples": c.checked,
                   "d": None if c.d == math.inf else c.d, "d_pair": list(c.d_pair or ()),
                   "d_time": None if c.d_pair is None else c.d_time,
-                  "distance_now": c.monitor.min_distance, "refused": refused,
+                  "distance_now": (c.monitor.min_distance
+                                   if math.isfinite(c.monitor.min_distance) else None),
+                  "refused": refused,
                   "gaps": self.gaps, "largest_gap": self.largest_gap,
                   "solved": list(self.solved)}
         values.update({f"refused_{field}": n for field, n in self.refused.items()})

@@ -76,11 +76,11 @@ class CollisionMonitorNode(Node):
         if not math.isfinite(given.get("tolerance", 0.0)):
             raise SceneError("tolerance", f"expected a finite number, got {shown(given['tolerance'])}")
         scene = self.scene if self.scene is not None else CollisionSettings()
-        receipt = given.pop("stamps", getattr(getattr(scene, "collision", None), "stamps", "header"))
         if "tolerance" in given:
             given["margin"] = max(CollisionSettings.margin, given["tolerance"])
         try:
-            return CollisionSettings.from_scene(scene, **given), receipt == "receipt"
+            settings = CollisionSettings.from_scene(scene, **given)
+            return settings, settings.stamps == "receipt"
         except SceneError as e:  # named as the node's parameter, not the scene key
             raise SceneError(e.path.removeprefix("collision."), e.reason) from None
 
@@ -100,14 +100,14 @@ class CollisionMonitorNode(Node):
             return
         self._publish_verdict()  # at once: clients learn that the model has reached the monitor
 
-    def _on_joint_state(self, msg):
+    def _on_joint_state(self, msg, info):
         stream = self.stream
         if stream is None:
             return self._warn("no model", "joint state skipped: no model yet on panel_deploy/model")
         try:
             t, names, position, velocity = messages.read_joint_state(msg, stream.names)
-            if self._receipt:
-                t = self.get_clock().now().nanoseconds * 1e-9
+            if self._receipt:  # when it left the driver, else when it arrived: not when handled
+                t = (info["source_timestamp"] or info["received_timestamp"]) * 1e-9
             theta, omega = stream.coordinates(names, position, velocity)
             deployments = stream.deployments
             found = stream.update(t, theta, omega)

@@ -34,7 +34,7 @@ import yaml
 
 from .dynamics.result import PER_SAMPLE, SimulationResult, Status
 from .errors import SceneError, TrajectoryError, shown
-from .validate import load_yaml, yaml_problem
+from .validate import foreign_file, load_yaml, yaml_problem
 
 FORMAT_VERSION = 3
 #: Versions :func:`load_trajectory` reads (2: the columns of ``theta``,
@@ -136,7 +136,7 @@ def load_trajectory(path) -> StoredTrajectory:
     if not path.exists():
         raise TrajectoryError(f"{path}: trajectory file not found")
     if path.is_dir() or not zipfile.is_zipfile(path):
-        raise TrajectoryError(f"{path}: {_what_else(path)}")
+        raise TrajectoryError(f"{path}: {foreign_file(path) or 'not a trajectory file (expected an .npz archive)'}")
     try:
         _check_declared_sizes(path)
         with np.load(path, allow_pickle=False) as z:
@@ -187,21 +187,6 @@ def load_trajectory(path) -> StoredTrajectory:
     result = SimulationResult(**{k: data[k] for k in _ARRAYS}, energy=energy, **run)
     return StoredTrajectory(result, scene, model, stiffness,
                             np.array([h.c for h in model.hinges]), version)
-
-
-def _what_else(path) -> str:
-    """Why ``path`` (an existing non-zip) is not a trajectory file, and what it may be."""
-    if path.is_dir():
-        if (path / "metadata.yaml").is_file():
-            return ("a rosbag2 folder, not a trajectory file: convert it to MCAP "
-                    "(ros2 bag convert) and give the .mcap file")
-        return "is a folder, not a trajectory file"
-    with open(path, "rb") as f:
-        head = f.read(16)
-    if head.startswith(b"SQLite format 3"):
-        return ("an SQLite file (a rosbag2 .db3?), not a trajectory file: convert the bag to "
-                "MCAP (ros2 bag convert) and give the .mcap file")
-    return "not a trajectory file (expected an .npz archive)"
 
 
 def _check_names(path, data, expected):

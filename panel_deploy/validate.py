@@ -242,6 +242,26 @@ def _umask() -> int:
     return mask
 
 
+def foreign_file(path) -> str | None:
+    """What an input that is none of our files is, and what to do with it
+    (a rosbag2 folder or SQLite bag: convert it to MCAP), or None."""
+    path = Path(path)
+    try:
+        if path.is_dir():
+            if (path / "metadata.yaml").is_file():
+                return ("a rosbag2 folder: convert it to one MCAP file (ros2 bag convert, "
+                        "storage mcap) and give the .mcap file")
+            return "is a folder, not a file"
+        with open(path, "rb") as f:
+            head = f.read(16)
+    except OSError:
+        return None
+    if head.startswith(b"SQLite format 3"):
+        return ("an SQLite file (a rosbag2 .db3 bag?): convert the bag to MCAP (ros2 bag "
+                "convert, storage mcap) and give the .mcap file")
+    return None
+
+
 #: Longest file name (bytes) of the file systems we write to.
 NAME_MAX = 255
 

@@ -73,8 +73,7 @@ def test_corrupt_chunk(recording, tmp_path, capsys):
 
 @pytest.mark.parametrize("compression", ["zstd", "lz4"])
 @pytest.mark.parametrize("declared, zeros, expected", [
-    (1 << 30, 1 << 30, "declares 1073741824 bytes uncompressed, above the reader's limit of "
-                       "33554432"),  # 1 GiB of zeros: 33 kB compressed
+    (1 << 30, 1 << 30, "to 1 above 33554432 bytes"),  # 1 GiB of zeros: 33 kB (zstd), 4.4 MB (lz4)
     (1000, 1 << 24, "declares 1000 bytes uncompressed but holds more"),  # the frame is not trusted
     (1000, 10, "declares 1000 bytes uncompressed but holds 10"),
 ])
@@ -257,3 +256,103 @@ def test_a_namespaced_ros2_bag_record_is_read_by_namespace(tmp_path, capsys):
     assert main(["replay", str(mcap_file), "--scene", "paper_4x4", "--namespace", "array1",
                  "--png", str(png), "--at", "0,0.3"]) == 0
     assert png.stat().st_size > 10_000
+
+
+# What a careful user's foreign recordings hold (issue 32): refused only where the data
+# that matter are wrong.
+
+def _encoder_stream(path, *, order=None, repeat=1, effort=None, extra=None):
+    """The paper deployment's tree joint states (0.6 s, 200 Hz) written to ``path`` by
+    our writer: in file ``order`` (log times as stamps), each message ``repeat`` times,
+    an ``effort`` row, and ``extra(recorder)`` called first."""
+    scene = load_scene(resolve_scene("paper_4x4"))
+    scene = scene.replace(simulation=replace(scene.simulation, t_end=0.6, samples=121))
+    model, result, report = simulate_scene(scene)
+    names = [model.hinges[h].name for h in model.joints]
+    rows = list(range(len(result.t))) if order is None else order(len(result.t))
+    with Recorder(path) as rec:
+        if extra is not None:
+            extra(rec)
+        for j in rows:
+            msg = m.joint_state(names, result.t[j], result.theta[j], result.omega[j],
+                                np.zeros(len(names)) if effort is None else effort)
+            for _ in range(repeat):
+                rec.write("/joint_states", m.JOINT_STATE, msg, round(result.t[j] * 1e9))
+    return report
+
+
+def _collided(capsys, path):
+    assert main(["collide", str(path), "--scene", "paper_4x4", "--json"]) == 0, \
+        capsys.readouterr().err
+    return json.loads(capsys.readouterr().out)["first_collision"]
+
+
+@pytest.mark.parametrize("case", ["out of file order", "each twice", "inf effort",
+                                  "40 MB on another topic"])
+def test_recordings_with_harmless_oddities_are_read(tmp_path, capsys, case):
+    path = tmp_path / "odd.mcap"
+    kwargs = {"out of file order": {"order": lambda n: list(range(n))[::-1]},
+              "each twice": {"repeat": 2},
+              "inf effort": {"effort": np.full(11, np.inf)},
+              "40 MB on another topic": {"extra": lambda rec: rec.write(
+                  "/camera/raw", m.STRING, m.string(np.random.default_rng(0).bytes(30 << 20)
+                                                    .hex()[:40 << 20]), 0)}}[case]
+    report = _encoder_stream(path, **kwargs)
+    first = _collided(capsys, path)
+    assert first["pair"] == list(report.first_collision.names)
+    assert abs(first["t"] - report.first_collision.t) <= 0.005 + 1e-6
+
+
+def test_an_unknown_chunk_compression_is_named(tmp_path, capsys):
+    from hostile import mcap_with_chunk
+    data = mcap_with_chunk(1000, 1000, "zstd").replace(b"\x04\x00\x00\x00zstd", b"\x04\x00\x00\x00zzz1")
+    path = tmp_path / "brotli.mcap"
+    path.write_bytes(data)
+    assert main(["collide", str(path), "--scene", "paper_4x4"]) == 2
+    _one_line_error(capsys, path, "compression 'zzz1' is none of the MCAP specification's")
+
+
+def test_a_run_a_recording_cannot_represent_is_refused_before_writing(tmp_path, capsys):
+    path = tmp_path / "tiny.mcap"
+    assert main(["simulate", "paper_4x4", "--set", "simulation.t_end=1e-9", "--record",
+                 str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--record: samples 2.5e-12 s apart" in err[0], err
+    assert not path.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_a_cut_recording_and_a_wrong_flag_are_one_line(recording, tmp_path, capsys):
+    data = recording.read_bytes()
+    cut = tmp_path / "killed.abcdefgh.part.mcap"
+    cut.write_bytes(data[:len(data) // 2])
+    assert main(["replay", str(cut), "--png", str(tmp_path / "p.png"), "--at", "19.5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--at: 19.5 s is outside the recording" in err[0], err
+    assert main(["replay", str(cut), "--png", str(tmp_path / "p.png"), "--at", "0.1"]) == 0
+    assert "is truncated" in capsys.readouterr().err  # the note, once the work is done
+
+
+def test_a_recording_cut_before_its_first_chunk_says_so(recording, tmp_path, capsys):
+    cut = tmp_path / "early.part.mcap"
+    data = recording.read_bytes()
+    first_chunk = data.index(b"\x06", 8)  # opcode CHUNK: cut just after it starts
+    cut.write_bytes(data[:first_chunk + 100])
+    assert main(["collide", str(cut)]) == 2
+    err = capsys.readouterr().err
+    assert "no messages in this recording" in err or "cut short" in err, err
+
+
+@pytest.mark.parametrize("kind", ["folder", "db3"])
+@pytest.mark.parametrize("command", ["collide", "replay"])
+def test_rosbag2_bags_are_named_with_what_to_do(tmp_path, capsys, kind, command):
+    if kind == "folder":
+        path = tmp_path / "bag"
+        path.mkdir()
+        (path / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    else:
+        path = tmp_path / "bag_0.db3"
+        path.write_bytes(b"SQLite format 3\x00" + bytes(100))
+    args = [command, str(path)] + (["--png", str(tmp_path / "p.png")] if command == "replay" else [])
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "ros2 bag convert" in err[0], err

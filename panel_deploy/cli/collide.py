@@ -26,12 +26,12 @@ def collide_command(args) -> int:
     first, so this is a safety net).
     """
     overrides = getattr(args, "set", None) or ()
-    verdict = None
+    verdict, notes = None, None
     if is_mcap(args.trajectory):
         from ..record.analysis import check_recording, read_deployment
         d = read_deployment(args.trajectory, args.scene, args.namespace, overrides)
         stream, report = check_recording(d)
-        result, level_text = d.track, stream.verdict()[:2]
+        result, level_text, notes = d.track, stream.verdict()[:2], d.print_notes
         verdict = {"level": level_text[0], "message": level_text[1]}
     else:
         if args.scene or args.namespace:
@@ -62,6 +62,8 @@ def collide_command(args) -> int:
         print(report.to_text())
         if verdict is not None and verdict["level"] == 1:
             print(f"stream: {verdict['message']}")
+    if notes is not None:
+        notes()
     return 0
 
 

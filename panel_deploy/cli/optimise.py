@@ -37,9 +37,11 @@ def optimise_command(args) -> int:
     if args.record and not args.out:
         raise SceneError("--record", "needs --out RESULT.yaml: the recording deploys the K written there")
     scene = scene_of(args)
+    if args.record:
+        from ..record.deployment import check_recordable, record_optimum
+        check_recordable(scene)
     code = optimise_scene(args, scene)
     if args.record and code != 130:
-        from ..record.deployment import record_optimum
         record_optimum(args.record, scene, args.out)
         print(f"recorded the deployment of {args.out} -> {args.record}", file=sys.stderr)
     return code

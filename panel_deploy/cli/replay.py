@@ -43,6 +43,7 @@ def replay_command(args) -> int:
         render_strip(d, at, args.png)
         print(f"{len(at)} frames -> {args.png}")
     if args.png and not (args.save or args.spawn or args.serve):
+        d.print_notes()
         return 0
     import rerun as rr
 
@@ -79,6 +80,7 @@ def replay_command(args) -> int:
         write_atomic(args.save, lambda f: f.write(data), "--save", mode="wb")
     target = args.save or ("rerun " + sink.uri if args.serve else "the rerun viewer")
     print(f"{frames} frames of {d.recording.path} -> {target}")
+    d.print_notes()
     if args.serve:
         try:
             threading.Event().wait()

@@ -16,7 +16,8 @@ def simulate_command(args) -> int:
     not (or if a number in the summary came out non-finite)."""
     scene = scene_of(args)
     if args.record:
-        from ..record.deployment import record_deployment
+        from ..record.deployment import check_recordable, record_deployment
+        check_recordable(scene)
         model = scene_model(scene, args.stiffness)
         result, report = record_deployment(args.record, scene, model)
     else:

@@ -9,7 +9,7 @@ else the one the recording ran (its ``dynamics/scene``, else its
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from .. import contract
 from ..errors import PanelDeployError, SceneError, TrajectoryError
@@ -26,6 +26,14 @@ class RecordedDeployment:
     model: object
     track: HingeTrack
     states: JointStates  #: every joint of the joint states, as recorded
+    #: What the reader noticed (a truncated file, times counted from a first
+    #: stamp): for stderr once the command has done its work, so that a
+    #: command that fails prints one line only.
+    notes: list = field(default_factory=list)
+
+    def print_notes(self) -> None:
+        for note in self.notes:
+            print(f"panel-deploy: note: {note}", file=sys.stderr)
 
 
 def recorded_scene(path, scene: str | None = None, namespace: str | None = None,
@@ -65,7 +73,7 @@ def read_deployment(path, scene: str | None = None, namespace: str | None = None
     """Open ``path`` and map its joint states onto the scene's hinges
     (:func:`recorded_scene` says which scene).
 
-    A truncated file is read up to where it ends, with a note on stderr.
+    A truncated file is read up to where it ends, with a note (:attr:`RecordedDeployment.notes`).
 
     Raises
     ------
@@ -81,13 +89,14 @@ def read_deployment(path, scene: str | None = None, namespace: str | None = None
     model = build_model(parsed)
     states = joint_states(recording)
     track = hinge_track(states, model, path, parsed.name or str(parsed.source or ""))
+    notes = []
     if recording.truncated:
-        print(f"panel-deploy: note: {path} is truncated ({recording.truncated}); read up to "
-              f"t = {track.t[-1] + track.t0:.4f} s ({len(track.t)} joint states)", file=sys.stderr)
+        notes.append(f"{path} is truncated ({recording.truncated}); read up to "
+                     f"t = {track.t[-1] + track.t0:.4f} s ({len(track.t)} joint states)")
     if track.t0:
-        print(f"panel-deploy: note: times are counted from the first "
-              f"{recording.topic(contract.JOINT_STATES)} stamp, {track.t0:.9f} s", file=sys.stderr)
-    return RecordedDeployment(recording, parsed, model, track, states)
+        notes.append(f"times are counted from the first {recording.topic(contract.JOINT_STATES)} "
+                     f"stamp, {track.t0:.9f} s")
+    return RecordedDeployment(recording, parsed, model, track, states, notes)
 
 
 def check_recording(d: RecordedDeployment):

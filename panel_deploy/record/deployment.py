@@ -22,6 +22,7 @@ from .. import contract
 from ..contract.cdr import SampleEncoder
 from ..collision import CollisionSettings, StreamCheck
 from ..dynamics.deployment import Deployment
+from ..errors import SceneError
 from ..export.urdf import model_urdf
 from ..kinematics import forward_kinematics
 from ..scene_text import scene_yaml
@@ -43,6 +44,25 @@ def _batches(samples, size):
             batch = []
     if batch:
         yield batch
+
+
+def check_recordable(scene, flag: str = "--record") -> None:
+    """Refuse, before any work, a run whose samples a recording cannot tell
+    apart: stamps count whole nanoseconds, so samples closer than 1 ns would
+    share one and the recording could not be read back.
+
+    Raises
+    ------
+    SceneError
+        Naming ``flag`` and what to change.
+    """
+    sim = scene.simulation
+    interval = sim.t_end / (sim.samples - 1)
+    if contract.nanoseconds(interval) < 1:
+        raise SceneError(flag, f"samples {interval:.3g} s apart (simulation.t_end / "
+                               f"(simulation.samples - 1)) cannot be told apart in a recording, "
+                               f"whose stamps count whole nanoseconds: give simulation.t_end >= "
+                               f"{(sim.samples - 1) * 1e-9:.3g} s or fewer samples")
 
 
 def record_deployment(path, scene, model):

@@ -25,16 +25,23 @@ from mcap.records import Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
 from ..errors import PanelDeployError, TrajectoryError, shown
+from ..validate import foreign_file
 from .. import contract
 from ..model import hinge_order
 from . import messages
 
 MAGIC = b"\x89MCAP0\r\n"
-#: Largest uncompressed chunk read. Writers close chunks at a few MiB (this
-#: package at 4 MiB, rosbag2 at 768 KiB); a chunk is inflated whole and split
-#: record by record in Python, so a 1 GiB chunk of zeros (30 kB compressed)
-#: would take gigabytes and minutes.
+#: Uncompressed chunk size read whatever its compression ratio. Writers close
+#: chunks at a few MiB (this package at 4 MiB, rosbag2 at 768 KiB), but one
+#: large message (a camera image) makes a larger chunk.
 MAX_CHUNK_BYTES = 32 << 20
+#: Above :data:`MAX_CHUNK_BYTES`, a chunk may inflate to at most this many
+#: times its compressed size: a chunk is inflated whole and split record by
+#: record in Python, and a 1 GiB chunk of zeros (30 kB compressed, 35,000 to
+#: 1) would take gigabytes and minutes, while sensor data compress 2-10 fold.
+MAX_CHUNK_RATIO = 64
+#: The chunk compressions of the MCAP specification.
+COMPRESSIONS = ("", "zstd", "lz4")
 
 
 def is_mcap(path) -> bool:
@@ -96,7 +103,8 @@ class Recording:
         return len(self._raw.get(topic, ()))
 
     def messages(self, topic: str, typename: str | None = None) -> list:
-        """``[(log_time ns, message)]`` of ``topic``, decoded with the rosbags Jazzy type store.
+        """``[(log_time ns, message)]`` of ``topic`` in log-time order (exact repeats
+        once), decoded with the rosbags Jazzy type store.
 
         Raises
         ------
@@ -114,8 +122,13 @@ class Recording:
         if self.encodings[topic] != "cdr":
             raise TrajectoryError(f"{self.path}: {topic} is encoded as "
                                   f"{shown(self.encodings[topic])}, expected ROS 2 'cdr'")
-        out = []
-        for i, (log_time, data) in enumerate(self._raw.get(topic, ())):
+        out, previous = [], None
+        # In log-time order (a file's order may differ; MCAP readers sort), an
+        # exact repeat of a message (same time, same bytes) read once.
+        for i, (log_time, data) in enumerate(sorted(self._raw.get(topic, ()), key=lambda r: r[0])):
+            if (log_time, bytes(data)) == previous:
+                continue
+            previous = (log_time, bytes(data))
             try:
                 out.append((log_time, messages.deserialize(data, actual)))
             except ValueError as e:
@@ -161,6 +174,9 @@ def open_recording(path, namespace: str | None = None) -> Recording:
         has no joint states of.
     """
     path = Path(path)
+    foreign = foreign_file(path)
+    if foreign:
+        raise TrajectoryError(f"{path}: {foreign}")
     try:
         f = open(path, "rb")
     except OSError as e:
@@ -258,9 +274,14 @@ def _bounded(chunk: Chunk) -> Chunk:
     more than :data:`MAX_CHUNK_BYTES` (the compressed frame's own size field is
     not trusted either: never more than the declared size is inflated). The
     caller names the file and the record's position."""
-    if chunk.uncompressed_size > MAX_CHUNK_BYTES:
-        raise TrajectoryError(f"it declares {chunk.uncompressed_size} bytes uncompressed, "
-                              f"above the reader's limit of {MAX_CHUNK_BYTES}")
+    if chunk.compression not in COMPRESSIONS:
+        raise TrajectoryError(f"its compression {shown(chunk.compression)} is none of the MCAP "
+                              f"specification's (zstd, lz4, or none)")
+    limit = max(MAX_CHUNK_BYTES, MAX_CHUNK_RATIO * len(chunk.data))
+    if chunk.compression and chunk.uncompressed_size > limit:
+        raise TrajectoryError(f"it declares {chunk.uncompressed_size} bytes uncompressed from "
+                              f"{len(chunk.data)} compressed, above the reader's limit of {limit} "
+                              f"({MAX_CHUNK_RATIO} to 1 above {MAX_CHUNK_BYTES} bytes)")
     if chunk.compression == "zstd":
         with zstandard.ZstdDecompressor().stream_reader(chunk.data) as stream:
             data = stream.read(chunk.uncompressed_size + 1)
@@ -292,7 +313,7 @@ class JointStates:
     position : (s, n) ndarray
         rad.
     velocity, effort : (s, n) ndarray or None
-        rad/s and N m; None when the messages carry none.
+        rad/s and N m; None when the messages carry none (effort: or one not finite).
     log_time : (s,) ndarray
         When each message was recorded (the MCAP log time), s: its arrival
         for ``ros2 bag record``, its stamp for this package's recordings.
@@ -346,6 +367,9 @@ def joint_states(recording: Recording) -> JointStates:
         if j and not t[j] > t[j - 1]:
             raise TrajectoryError(f"{where}: stamp {t[j]:.9g} s is not after the previous "
                                   f"one ({t[j - 1]:.9g} s)")
+    # Efforts are carried along, never used: one that is not finite only drops them.
+    if present["effort"] and not np.all(np.isfinite(arrays["effort"])):
+        present["effort"] = False
     for key, out in arrays.items():
         if present[key] and not np.all(np.isfinite(out)):
             j, i = (int(x) for x in np.argwhere(~np.isfinite(out))[0])

@@ -32,7 +32,8 @@ import test_fuzz_cli as fz  # noqa: E402
 
 PROPERTIES = ["scene mutations", "--set values", "scene bytes", "result bytes",
               "trajectory bytes", "trajectory arrays", "aliases", "declared sizes", "chunk sizes",
-              "same path", "output names", "signals"]
+              "same path", "output names", "signals", "stdout targets", "node remaps",
+              "foreign recordings"]
 
 
 def main(argv=None) -> int:
@@ -78,6 +79,12 @@ def main(argv=None) -> int:
         "output names": given(st.sampled_from(sorted(fz.OUTPUT_FLAGS)), fz.output_names)(
             fz.case_output_name),
         "signals": given(fz.signals, fz.signal_delays)(fz.case_signal),
+        "stdout targets": given(st.sampled_from(sorted(fz.STDOUT_OUTPUTS)),
+                                st.sampled_from(fz.STDOUT_NAMES), fz.stdout_sinks)(
+            fz.case_stdout_target),
+        "node remaps": given(st.sampled_from(["__ns", "__node"]), fz.remap_values)(fz.case_remap),
+        "foreign recordings": given(fz.oddities, st.integers(0, 2**16))(
+            fz.case_foreign_recording),
     }
     assert list(properties) == PROPERTIES
     properties = {k: v for k, v in properties.items() if not args.only or k in args.only}

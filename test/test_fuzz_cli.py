@@ -366,6 +366,137 @@ def case_output_name(flag, name):
         run_cli("output", [*OUTPUT_FLAGS[flag], flag, f"{tmp}/{name}"])
 
 
+# --- issue 32: standard output as a target, node remaps, foreign recordings ---
+
+CLI = str(Path(sys.executable).parent / "panel-deploy")
+#: Outputs that can stream to standard output, and how to recognise what came out.
+STDOUT_OUTPUTS = {
+    "--record": (["simulate", str(PAPER), *FAST], lambda b: b.startswith(b"\x89MCAP0\r\n")),
+    "--out": (["simulate", str(PAPER), *FAST], lambda b: b.startswith(b"PK")),
+    "--mjcf": (["export", str(PAPER)], lambda b: b.lstrip().startswith(b"<")),
+}
+STDOUT_NAMES = ("-", "/dev/stdout", "link to /proc/self/fd/1")
+stdout_sinks = st.sampled_from(["pipe", "file"])
+
+
+def case_stdout_target(flag, name, sink):
+    """``flag`` writing standard output by ``name``, standard output a pipe or a file:
+    exit 0 with the whole output there and the human lines on stderr, or exit 2 in one line."""
+    argv, looks_right = STDOUT_OUTPUTS[flag]
+    with tempfile.TemporaryDirectory() as tmp:
+        target = name
+        if name.startswith("link"):
+            target = Path(tmp) / "out"
+            os.symlink("/proc/self/fd/1", target)
+        out_file = Path(tmp) / "stdout.bin"
+        start = time.perf_counter()
+        with open(out_file, "wb") as f:
+            proc = subprocess.run([CLI, *argv, flag, str(target)], stderr=subprocess.PIPE,
+                                  stdout=f if sink == "file" else subprocess.PIPE, timeout=300)
+        out = out_file.read_bytes() if sink == "file" else proc.stdout
+        err = proc.stderr.decode(errors="replace")
+        lines = err.strip().splitlines()
+        LOG.append(("stdout", proc.returncode, time.perf_counter() - start,
+                    lines[0] if lines else "", [flag, name, sink]))
+        if proc.returncode == 2:
+            if len(lines) != 1 or out:
+                raise Broken(f"stdout: exit 2 with {err!r} and {len(out)} bytes for {flag} {name}")
+        elif proc.returncode in (0, 1):
+            if not looks_right(out):
+                raise Broken(f"stdout: {flag} {name} ({sink}) wrote {out[:40]!r}; stderr {err!r}")
+            if "Traceback" in err:
+                raise Broken(f"stdout: traceback for {flag} {name}: {err}")
+            if name.startswith("link") and not os.path.islink(target):
+                raise Broken(f"stdout: the link {target} was replaced")
+        else:
+            raise Broken(f"stdout: exit {proc.returncode} for {flag} {name}: {err!r}")
+
+
+#: Remap rules a node executable is started with: names that are no ROS names.
+remap_values = st.one_of(
+    st.text(min_size=1, max_size=40),
+    st.integers(256, 400).map(lambda n: "/" + "a" * n),
+    st.sampled_from(["/ärray", "/a//b", "a b", "/1a", "~x", "/a/", "", "\n", "ä", "/{x}"]))
+
+
+def case_remap(key, value):
+    """``collision_monitor --ros-args -r key:=value`` with a value that is no valid
+    name: exit 2 and one line (a valid one would start the node: not drawn)."""
+    from rclpy.validate_namespace import validate_namespace
+    from rclpy.validate_node_name import validate_node_name
+
+    try:
+        (validate_namespace if key == "__ns" else validate_node_name)(value)
+        return  # a valid name starts the node; not this property's case
+    except Exception:  # noqa: BLE001 - rclpy's own invalid-name exceptions
+        pass
+    start = time.perf_counter()
+    proc = subprocess.run([str(Path(sys.executable).parent / "collision_monitor"), "--ros-args",
+                           "-r", f"{key}:={value}"], capture_output=True, timeout=60)
+    err = proc.stderr.decode(errors="replace")
+    lines = err.strip().splitlines()
+    LOG.append(("remaps", proc.returncode, time.perf_counter() - start,
+                lines[0] if lines else "", [key, value]))
+    if proc.returncode != 2 or len(lines) != 1 or not lines[0].startswith("panel-deploy: error"):
+        raise Broken(f"remaps: -r {key}:={value!r}: exit {proc.returncode}, {err!r}")
+
+
+#: Oddities of recordings from other tools, each harmless to the joint states.
+ODDITIES = ("shuffled", "repeated", "inf effort", "big message", "unknown compression")
+oddities = st.lists(st.sampled_from(ODDITIES), min_size=1, max_size=3, unique=True)
+
+
+def foreign_recording(path, odd, seed) -> None:
+    """A short paper deployment's tree joint states by our writer, with ``odd``."""
+    rng = np.random.default_rng(seed)
+    t, names, theta = FOREIGN
+    rows = list(range(len(t)))
+    if "shuffled" in odd:
+        rng.shuffle(rows)
+    with Recorder(path, chunk_span=0.01) as rec:
+        if "big message" in odd:
+            rec.write("/camera/raw", messages.STRING,
+                      messages.string(rng.bytes(int(rng.integers(1, 4 << 20))).hex()), 0)
+        for j in rows:
+            effort = np.full(len(names), np.inf if "inf effort" in odd else 0.0)
+            msg = messages.joint_state(names, t[j], theta[j], np.zeros(0), effort)
+            for _ in range(2 if "repeated" in odd else 1):
+                rec.write("/joint_states", messages.JOINT_STATE, msg, round(t[j] * 1e9))
+    if "unknown compression" in odd:
+        data = path.read_bytes()
+        path.write_bytes(data.replace(b"\x04\x00\x00\x00zstd", b"\x04\x00\x00\x00zzz1", 1))
+
+
+def case_foreign_recording(odd, seed):
+    """collide on a recording with ``odd``: the clean stream's first collision, or
+    exit 2 in one line naming the compression when a chunk's is unknown."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "foreign.mcap"
+        foreign_recording(path, odd, seed)
+        code, out, err = run_cli("foreign", ["collide", path, "--scene", PAPER, "--json"])
+    if "unknown compression" in odd:
+        if code != 2 or "compression 'zzz1'" not in err:
+            raise Broken(f"foreign: {odd}: exit {code}, {err!r}")
+        return
+    if code != 0:
+        raise Broken(f"foreign: {odd}: exit {code}, {err!r}")
+    if json.loads(out)["first_collision"]["pair"] != FOREIGN_PAIR:
+        raise Broken(f"foreign: {odd}: first collision {json.loads(out)['first_collision']}")
+
+
+def _foreign_stream():
+    from panel_deploy.pipeline import simulate_scene
+    from panel_deploy.scene import load_scene
+
+    scene = load_scene(PAPER, ["simulation.t_end=0.5", "simulation.samples=101"])
+    model, result, report = simulate_scene(scene)
+    names = [model.hinges[h].name for h in model.joints]
+    return (result.t, names, result.theta), list(report.first_collision.names)
+
+
+FOREIGN, FOREIGN_PAIR = _foreign_stream()
+
+
 #: The run of issue 26's report: a deployment recorded as it is computed
 #: (numba loads its cached kernels during the first second).
 SIGNALLED = ["simulate", str(PAPER), "--record"]
@@ -531,6 +662,25 @@ def test_fuzz_output_names(flag, name):
 @given(signum=signals, delay=signal_delays)
 def test_fuzz_signals_at_random_times(signalled_kernels, signum, delay):
     case_signal(signum, delay)
+
+
+@settings(CI, max_examples=6)
+@given(flag=st.sampled_from(sorted(STDOUT_OUTPUTS)), name=st.sampled_from(STDOUT_NAMES),
+       sink=stdout_sinks)
+def test_fuzz_standard_output_targets(flag, name, sink):
+    case_stdout_target(flag, name, sink)
+
+
+@settings(CI, max_examples=8)
+@given(key=st.sampled_from(["__ns", "__node"]), value=remap_values)
+def test_fuzz_node_remaps(key, value):
+    case_remap(key, value)
+
+
+@settings(CI, max_examples=15)
+@given(odd=oddities, seed=st.integers(0, 2**16))
+def test_fuzz_foreign_recordings(odd, seed):
+    case_foreign_recording(odd, seed)
 
 
 def test_the_contract_check_can_fail(monkeypatch):

@@ -73,6 +73,23 @@ def test_stream_matches_the_batch_check_and_restarts(scene):
         stream.update(result.t[50], result.theta[50], result.omega[50])
 
 
+def test_every_verdict_value_is_finite_or_none(scene):
+    """No ``inf`` on /diagnostics: a distance not computed yet (or beyond the broad
+    phase) is None, as ``d`` is before there is one."""
+    s, model, result = _run(scene, 200.0)
+    stream = StreamCheck(model, CollisionSettings.from_scene(s))
+    seen = set()
+    for j in range(len(result.t)):
+        stream.update(result.t[j], result.theta[j], result.omega[j])
+        values = stream.verdict()[2]
+        for key, value in values.items():
+            for x in (value if isinstance(value, list) else [value]):
+                if isinstance(x, float):
+                    assert math.isfinite(x), (key, x, j)
+        seen.add(values["distance_now"] is None)
+    assert False in seen  # a distance is reported where one is computed
+
+
 def test_epoch_stamps_with_sub_microsecond_spacing_stay_bounded(khz, clean):
     """Wall-clock stamps (1.76e9 s) arriving in bursts 0.3 us apart: the
     between-sample search used to halve such intervals forever (1 GB stacks)."""

@@ -356,3 +356,36 @@ def test_rosbag2_bags_are_named_with_what_to_do(tmp_path, capsys, kind, command)
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "ros2 bag convert" in err[0], err
+
+
+def test_receipt_timing_never_reports_a_collision_the_data_cannot_support(tmp_path, capsys):
+    """Arrivals of a loaded machine (1.06 ms apart typically, bursts up to 86 ms late)
+    for joint states stamped every 5 ms, timed by arrival (collision.stamps: receipt,
+    the log time of ``ros2 bag record``): the one collision the angles show, none earlier."""
+    scene = load_scene(resolve_scene("paper_4x4"))
+    scene = scene.replace(simulation=replace(scene.simulation, t_end=0.6, samples=121))
+    model, result, report = simulate_scene(scene)
+    names = [model.hinges[h].name for h in model.joints]
+    rng = np.random.default_rng(32)
+    gaps = rng.exponential(1.06e-3, len(result.t))
+    gaps[rng.random(len(result.t)) < 0.05] = 0.086  # a burst held back
+    arrival = np.cumsum(gaps)
+    path = tmp_path / "receipt.mcap"
+    with Recorder(path) as rec:
+        for j, t in enumerate(result.t):
+            rec.write("/joint_states", m.JOINT_STATE,
+                      m.joint_state(names, 0.0, result.theta[j], np.zeros(0), np.zeros(0)),
+                      round(arrival[j] * 1e9))  # unfilled stamps: 0
+    assert main(["collide", str(path), "--scene", "paper_4x4", "--json",
+                 "--set", "collision.stamps=receipt"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    first = got["first_collision"]
+    # The same as the samples alone show with their true times: the first sample whose
+    # angles interfere (the refined truth is between it and the one before), at its arrival.
+    from panel_deploy.collision import CollisionSettings, check_trajectory
+    at_samples = check_trajectory(model, result, CollisionSettings(refine=False)).first_collision
+    j = int(np.argmin(np.abs(result.t - at_samples.t)))
+    assert result.t[j - 1] < report.first_collision.t <= result.t[j] == at_samples.t
+    assert first["pair"] == list(at_samples.names)
+    assert first["t"] == pytest.approx(arrival[j] - arrival[0], abs=1e-9)
+    assert not [e for e in got["colliding_pairs"] if e["t"] < first["t"]]

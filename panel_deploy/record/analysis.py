@@ -87,7 +87,7 @@ def read_deployment(path, scene: str | None = None, namespace: str | None = None
 
     recording, parsed = recorded_scene(path, scene, namespace, overrides)
     model = build_model(parsed)
-    states = joint_states(recording)
+    states = joint_states(recording, parsed.collision.stamps)
     track = hinge_track(states, model, path, parsed.name or str(parsed.source or ""))
     notes = []
     if recording.truncated:
@@ -114,8 +114,7 @@ def check_recording(d: RecordedDeployment):
     settings = CollisionSettings.from_scene(d.scene)
     stream = StreamCheck(d.model, settings)
     states = d.states
-    times = states.log_time if d.scene.collision.stamps == "receipt" else states.t
-    for j, t in enumerate(times):
+    for j, t in enumerate(states.t):
         if stream.check is not None and t <= stream.origin and stream.check.checked > 1:
             break  # the stream starts again (a replay, the next run): one deployment is checked
         velocity = None if states.velocity is None else states.velocity[j]

@@ -327,8 +327,12 @@ class JointStates:
     log_time: np.ndarray | None = None
 
 
-def joint_states(recording: Recording) -> JointStates:
+def joint_states(recording: Recording, stamps: str = "header") -> JointStates:
     """The ``/joint_states`` of a recording, checked message by message.
+
+    ``stamps`` "header" times each by its ``header.stamp``; "receipt" by its
+    log time (when ``ros2 bag record`` received it: for drivers that leave
+    stamps unfilled), the header stamps then unread.
 
     Raises
     ------
@@ -363,7 +367,8 @@ def joint_states(recording: Recording) -> JointStates:
                 if len(values) != n:
                     raise TrajectoryError(f"{where}: {len(values)} {key} values for {n} names")
                 out[j] = np.asarray(values, dtype=float)[order]
-        t[j] = messages.seconds(msg.header.stamp)
+        t[j] = (messages.seconds(msg.header.stamp) if stamps == "header"
+                else logged[j][0] * 1e-9)
         if j and not t[j] > t[j - 1]:
             raise TrajectoryError(f"{where}: stamp {t[j]:.9g} s is not after the previous "
                                   f"one ({t[j - 1]:.9g} s)")

@@ -414,7 +414,7 @@ def case_stdout_target(flag, name, sink):
 
 #: Remap rules a node executable is started with: names that are no ROS names.
 remap_values = st.one_of(
-    st.text(min_size=1, max_size=40),
+    st.text(st.characters(blacklist_characters="\x00"), min_size=1, max_size=40),  # argv has no NUL
     st.integers(256, 400).map(lambda n: "/" + "a" * n),
     st.sampled_from(["/ärray", "/a//b", "a b", "/1a", "~x", "/a/", "", "\n", "ä", "/{x}"]))
 

@@ -270,3 +270,64 @@ def test_collide_on_the_recorded_stream_gives_the_node_s_first_collision(graph, 
     assert float(node["first_collision_t"]) == pytest.approx(first["t"], abs=1e-9)
     assert float(node["approach_speed"]) == pytest.approx(offline["v"], rel=1e-9)
     assert int(node["samples"]) == len(t) and offline["verdict"]["level"] == 2
+
+
+# Coverage (issue 30): the verdict is never OK while the monitor checks nothing.
+
+def _not_ok_within(diagnostics, words, seconds=1.0):
+    """The first non-OK verdict saying ``words``, and that it came within ``seconds``."""
+    start = time.monotonic()
+    wait_for(lambda: [s for s in statuses(diagnostics) if s.level != messages.OK
+                      and words in s.message], timeout=30, what=f"a verdict saying {words!r}")
+    return time.monotonic() - start
+
+
+def test_a_best_effort_publisher_is_a_non_ok_verdict(graph):
+    from rclpy.qos import qos_profile_sensor_data
+    client, _, diagnostics, events, _ = graph
+    new_deployment(client, diagnostics, events)
+    other = client.node.create_publisher(JointState, "/joint_states", qos_profile_sensor_data)
+    try:
+        assert _not_ok_within(diagnostics, "offers QoS this monitor cannot take") < 5.0
+        s = [s for s in statuses(diagnostics) if "cannot take" in s.message][-1]
+        assert s.level == messages.WARN and "reliability" in s.message
+    finally:
+        client.node.destroy_publisher(other)
+
+
+@pytest.mark.parametrize("case", ["foreign names", "a branch hinge missing"])
+def test_joint_states_all_refused_are_a_non_ok_verdict(graph, deployment, case):
+    client, publisher, diagnostics, events, _ = graph
+    t, names, theta, _, _ = deployment
+    new_deployment(client, diagnostics, events)
+    if case == "foreign names":
+        sent = [f"shoulder_{i}" for i in range(len(names))]
+        keep = list(range(len(names)))
+    else:
+        keep = [i for i, name in enumerate(names) if name != "r2c2-r3c2"]
+        sent = [names[i] for i in keep]
+    start = time.monotonic()
+    for j in range(20):
+        publish(publisher, sent, t[j], theta[j, keep])
+    wait_for(lambda: [s for s in statuses(diagnostics)
+                      if s.level == messages.WARN and "no joint state checked" in s.message],
+             timeout=30, what="the verdict")
+    assert time.monotonic() - start < 1.0 + 0.5  # a verdict every 0.25 s
+
+
+def test_a_stream_that_stops_mid_deployment_is_a_non_ok_verdict(graph, deployment):
+    client, publisher, diagnostics, events, _ = graph
+    t, names, theta, omega, _ = deployment
+    new_deployment(client, diagnostics, events)
+    for j in range(61):
+        publish(publisher, names, t[j], theta[j], omega[j])
+        time.sleep(0.001)
+    verdict_after(diagnostics, 61)
+    stopped = time.monotonic()
+    wait_for(lambda: [s for s in statuses(diagnostics) if "stream stalled" in s.message],
+             timeout=30, what="a stalled verdict")
+    assert time.monotonic() - stopped < 0.5 + 0.25 + 0.5  # stall, timer, delivery
+    stalled = [s for s in statuses(diagnostics) if "stream stalled" in s.message][-1]
+    assert stalled.level == messages.WARN and values(stalled)["samples"] == "61"
+    assert float(values(stalled)["since_last_sample"]) >= 0.5
+    assert values(stalled)["measured"].split(",") == list(names)

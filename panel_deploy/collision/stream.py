@@ -71,6 +71,10 @@ class StreamCheck:
         The interval before the last sample when it was a gap, s.
     solved : list of str
         Hinges the last sample solved from the loop closure.
+    measured : list of str
+        Hinges the last sample carried.
+    last_theta : ndarray or None
+        The tree angles of the last sample checked, rad.
     """
 
     def __init__(self, model: Model, collision: CollisionSettings):
@@ -85,6 +89,8 @@ class StreamCheck:
         self.refused: dict = {}
         self.gaps, self.largest_gap, self.last_gap = 0, 0.0, None
         self.solved: list = []
+        self.measured: list = []
+        self.last_theta = None
         self._intervals = deque(maxlen=GAP_WINDOW)
         self._last = None
 
@@ -115,7 +121,7 @@ class StreamCheck:
             return self._start(t, theta, omega)
         events = self.check.update(t - self.origin, theta, omega)
         self._interval(t - self._last)
-        self._last = t
+        self._last, self.last_theta = t, np.asarray(theta, dtype=float)
         return events
 
     def update_joints(self, t: float, names, position, velocity=None) -> list:
@@ -136,13 +142,14 @@ class StreamCheck:
         """Tree angles and rates (None without ``velocity``) of a message's hinges
         (:class:`~panel_deploy.sensing.TreeCoordinates`)."""
         theta, omega = self._coordinates(names, position, velocity)
-        self.solved = self._coordinates.solved
+        self.solved, self.measured = self._coordinates.solved, list(names)
         return theta, omega
 
     def _start(self, t, theta, omega) -> list:
         check = TrajectoryCheck(self.model, self.collision, keep=KEEP)
         events = check.update(0.0, theta, omega)
         self.check, self.origin, self._last = check, t, t
+        self.last_theta = np.asarray(theta, dtype=float)
         self.deployments += 1
         self.refused = {}
         self.gaps, self.largest_gap, self.last_gap = 0, 0.0, None
@@ -174,6 +181,12 @@ class StreamCheck:
         doubt, 2 collided. Times in ``values`` count from ``origin``."""
         c = self.check
         if c is None:
+            refused = sum(self.refused.values())
+            if refused:  # something arrives, nothing is checked: not OK
+                worst = max(self.refused, key=self.refused.get)
+                return 1, (f"no joint state checked: {refused} refused ({worst}: "
+                           f"{self.refused[worst]})"), {"deployment": self.deployments,
+                                                         "refused": refused}
             return 0, "waiting for joint states", {"deployment": self.deployments}
         refused = sum(self.refused.values())
         values = {"deployment": self.deployments, "origin": self.origin,
@@ -184,7 +197,7 @@ class StreamCheck:
                                    if math.isfinite(c.monitor.min_distance) else None),
                   "refused": refused,
                   "gaps": self.gaps, "largest_gap": self.largest_gap,
-                  "solved": list(self.solved)}
+                  "solved": list(self.solved), "measured": list(self.measured)}
         values.update({f"refused_{field}": n for field, n in self.refused.items()})
         if c.collided:
             e = c.first_events[0]

@@ -249,6 +249,8 @@ _PARSERS = {"t": float, "approach_speed": float, "normal_speed": _number, "dista
             "deployment": int, "origin": _number, "samples": int, "d": _number,
             "d_pair": _pair, "d_time": _number, "distance_now": _number, "refused": int,
             "gaps": int, "largest_gap": _number, "solved": lambda s: s.split(",") if s else [],
+            "measured": lambda s: s.split(",") if s else [], "expected": int,
+            "since_last_sample": _number,
             "first_collision_pair": _pair, "first_collision_t": _number,
             "success": lambda s: s == "True", "status": int, "time_to_flat": _number,
             "t_end": _number, "energy_balance_error": _number, "max_constraint_gap": _number,

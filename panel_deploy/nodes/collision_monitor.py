@@ -8,7 +8,13 @@ publishes each collision as it begins (``panel_deploy/collision_events``,
 one status per event, and the pair highlighted on
 ``panel_deploy/collision_markers``, cleared when a deployment starts) and its
 verdict on ``/diagnostics`` (OK; WARN when messages were refused or the
-stream had gaps; ERROR after a collision; twice a second and at every
+stream had gaps, or when its coverage is lost: joint states that cannot
+arrive (a publisher of incompatible QoS), joint states all refused (another
+robot's names, a hinge the loop closure cannot complete), a deployment's
+stream stalled before the array is flat, or fewer samples checked than the
+dynamics node says it sent; every verdict carries that coverage (``measured``
+and ``solved`` hinges, ``expected`` samples, ``since_last_sample`` s); ERROR
+after a collision; four times a second and at the first
 event). A malformed message is skipped and counted; WARNs about it come at
 most once a second per kind, saying how many were held back.
 """
@@ -16,8 +22,11 @@ most once a second per kind, saying how many were held back.
 from __future__ import annotations
 
 import math
-import re
+import time
 
+import numpy as np
+
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 
 from .. import contract
@@ -41,6 +50,12 @@ PARAMETERS = {
                    "arrived (drivers that leave stamps unfilled); empty: the scene's "
                    "collision.stamps"),
 }
+#: s between verdicts on /diagnostics.
+VERDICT_PERIOD = 0.25
+#: A deployment's stream is stalled after this many wall seconds without a joint
+#: state (or this many typical intervals, when longer) before the array is flat.
+STALL_S = 0.5
+STALL_INTERVALS = 20.0
 #: The scene's collision keys a parameter overrides when it holds no "the scene's" value.
 _OVERRIDES = {"tolerance": lambda v: v >= 0, "noise": lambda v: v >= 0,
               "speed_interval": lambda v: v >= 0, "stamps": bool, "refine": lambda v: True}
@@ -59,11 +74,19 @@ class CollisionMonitorNode(Node):
         self.events = runtime.publisher(self, contract.COLLISION_EVENTS)
         self.markers = runtime.publisher(self, contract.COLLISION_MARKERS)
         runtime.subscription(self, contract.MODEL, self._on_model)
-        runtime.subscription(self, contract.JOINT_STATES, self._on_joint_state)
+        runtime.subscription(self, contract.JOINT_STATES, self._on_joint_state,
+                             event_callbacks=SubscriptionEventCallbacks(
+                                 incompatible_qos=self._on_incompatible_qos))
+        # The simulated driver's outcome says how many samples a deployment had.
+        runtime.subscription(self, contract.DIAGNOSTICS, self._on_diagnostics)
+        self._dynamics = contract.status_name(self.get_namespace(), contract.DEPLOY.node)
+        self._expected = None      # samples of the current deployment, when its driver says
+        self._arrived = None       # monotonic s of the last joint state checked
+        self._qos_fault = None     # why joint states cannot arrive at all
         runtime.trigger_service(self, contract.RESET, self._reset)
         self._throttle = Throttle()
         self._apply()
-        self.create_timer(0.5, self._publish_verdict)
+        self.create_timer(VERDICT_PERIOD, self._publish_verdict)
 
     def _collision(self, changes=None) -> tuple:
         """``(settings, receipt)``: the scene's collision settings with the
@@ -112,23 +135,27 @@ class CollisionMonitorNode(Node):
             deployments = stream.deployments
             found = stream.update(t, theta, omega)
         except PanelDeployError as e:
-            stream.refuse(str(e).split(":", 1)[0][:40])
-            # One kind per fault, whatever its numbers: a flood of the same one is throttled.
-            return self._warn(re.sub(r"\d+(\.\d*)?(e[-+]?\d+)?", "#", str(e))[:80],
-                              f"joint state skipped: {e}")
+            field = str(e).split(":", 1)[0][:40]
+            stream.refuse(field)
+            # One kind per field, whatever its values: a flood of one fault is throttled.
+            return self._warn(field, f"joint state skipped: {e}")
+        self._arrived, self._qos_fault = time.monotonic(), None
         if stream.deployments != deployments:
             self._clear_markers()
+            self._expected = None
         if stream.last_gap is not None:
             self._warn("gap", f"gap of {stream.last_gap * 1e3:.1f} ms in joint_states before "
                               f"t = {t - stream.origin:.4f} s (typical interval "
                               f"{stream.typical_interval * 1e3:.2f} ms): collisions in it are "
                               f"located on interpolated motion")
         if found:
+            first = found[0] is stream.check.first_events[0]
             R, p = forward_kinematics(self.stream.model, theta)
             self.events.publish(messages.diagnostics(
                 t, *(messages.event_status(self.status_name, e) for e in found)))
             self.markers.publish(messages.collision_markers(self.stream.model, found[0], R, p))
-            self._publish_verdict()
+            if first:  # the verdict turns ERROR now; later events leave it so (timer only)
+                self._publish_verdict()
 
     def _warn(self, kind, text):
         """A WARN on the log and /diagnostics, at most one a second of each kind."""
@@ -143,13 +170,56 @@ class CollisionMonitorNode(Node):
         self.diagnostics.publish(messages.diagnostics(
             stamp or 0.0, messages.status(self.status_name, messages.WARN, text)))
 
+    def _on_diagnostics(self, msg):
+        for s in msg.status:
+            if s.name == self._dynamics and self.stream is not None:
+                samples = messages.values(s).get("samples")
+                if samples is not None:
+                    self._expected = samples
+
+    def _on_incompatible_qos(self, event):
+        policy = getattr(event.last_policy_kind, "name", str(event.last_policy_kind))
+        self._qos_fault = (f"a joint_states publisher offers QoS this monitor cannot take "
+                           f"({policy.removeprefix('RMW_QOS_POLICY_').lower()}: it needs "
+                           f"{contract.JOINT_STATES.qos.reliability}): none of its messages arrive")
+        self.get_logger().warning(self._qos_fault)
+        self._publish_verdict()
+
     def _publish_verdict(self):
         if self.stream is None:
             return
         level, text, values = self.stream.verdict()
+        coverage = self._coverage()
+        if coverage is not None and level < 2:
+            level, text = 1, (f"{text}; {coverage}" if level == 1 else coverage)
+        values.update(expected=self._expected, since_last_sample=(
+            None if self._arrived is None else time.monotonic() - self._arrived))
         stamp = values["origin"] + values["t"] if "t" in values else 0.0
         self.diagnostics.publish(messages.diagnostics(
-            stamp, messages.status(self.status_name, level, text, values)))
+            stamp, messages.status(self.status_name, level, text, values,
+                                   hardware_id=self.get_namespace().strip("/") or "panel_array")))
+
+    def _coverage(self) -> str | None:
+        """Why the last verdict covers less than it should, or None: joint states that
+        cannot arrive, a driver's samples not all checked, or a deployment whose stream
+        stopped before the array was flat."""
+        if self._qos_fault is not None:
+            return self._qos_fault
+        stream = self.stream
+        if stream.check is None or self._arrived is None:
+            return None
+        silent = time.monotonic() - self._arrived
+        if silent < max(STALL_S, STALL_INTERVALS * (stream.typical_interval or 0.0)):
+            return None
+        checked = stream.check.checked
+        if self._expected is not None:
+            return None if checked >= self._expected else (
+                f"checked {checked} of the {self._expected} joint states the deployment sent")
+        flat = self.scene.simulation.flat_tolerance
+        if stream.last_theta is not None and np.abs(stream.last_theta).max() <= flat:
+            return None  # deployed: a stream that stops now has ended
+        return (f"stream stalled: no joint state for {silent:.1f} s since t = "
+                f"{stream.last_stamp - stream.origin:.4f} s, the array not flat")
 
     def _clear_markers(self):
         """Take the last deployment's collision markers off displays."""
@@ -160,6 +230,7 @@ class CollisionMonitorNode(Node):
             response.success, response.message = False, "no model yet"
             return response
         self.stream.reset()
+        self._qos_fault = self._expected = self._arrived = None
         self._clear_markers()
         response.success, response.message = True, "the next joint state starts a new deployment"
         return response

@@ -49,7 +49,7 @@ FRAME_PREFIX = "frame_prefix"
 _FRAME_DOC = ("prefix of every frame on /tf, /tf_static and the panel markers (like "
               "robot_state_publisher's): two arrays side by side, e.g. 'array1/'")
 #: Ranges ``ros2 param describe`` shows; the rest of each check is DynamicsParameters'.
-_RANGE = {"rtol": (0.0, 1.0), "t_end": (0.0, 600.0), "rate_hz": (0.0, 1e6),
+_RANGE = {"rtol": (0.0, 1.0), "t_end": (0.0, 600.0), "rate_hz": (1e-3, 1e6),
           "real_time_factor": (0.0, math.inf)}
 PARAMETERS = {f.name: (Parameter.Type.DOUBLE_ARRAY if f.name == "stiffness" else f.default,
                        _DOC[f.name], *([_RANGE[f.name]] if f.name in _RANGE else []))

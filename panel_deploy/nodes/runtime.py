@@ -34,8 +34,9 @@ def declare(node, parameters: dict, check=None) -> None:
     values given at start (command line, params file, overrides) through the
     checks of a later set: type, range, then ``check`` (see :func:`_validator`).
 
-    A default given as a ``Parameter.Type`` declares an array without a
-    value (read as empty). ``(low, high)`` becomes the descriptor's range, so
+    A default given as a ``Parameter.Type`` declares an array of that type
+    whose value is empty (``get_parameters`` and ``ros2 param dump`` then
+    answer for it too). ``(low, high)`` becomes the descriptor's range, so
     ``ros2 param describe`` shows it. An integer (array) given for a double
     (array) is taken as doubles, at start and on set: ``-p rate_hz:=500`` and
     ``ros2 param set`` send integers for whole numbers.
@@ -55,6 +56,8 @@ def declare(node, parameters: dict, check=None) -> None:
                                ignore_override=True)
         if value is not None:
             given.append(Parameter(name, value=value))
+        elif isinstance(default, Parameter.Type):  # an empty list alone would be typed bytes
+            node.set_parameters([Parameter(name, default, [])])
     node.add_pre_set_parameters_callback(lambda params: [_coerced(node, p) for p in params])
     if check is not None:
         _validator(node, check)

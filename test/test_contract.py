@@ -146,3 +146,43 @@ def test_a_recording_offers_each_topic_with_the_live_qos(tmp_path):
                (topic.qos.depth, topic.qos.durability, topic.qos.reliability)
     assert qos["/clock"]["depth"] == 5000  # as the dynamics node publishes it
     assert open_recording(path).namespace == ""
+
+
+def test_get_parameters_answers_for_every_parameter_of_every_node(graph):
+    """``ros2 param dump`` and rqt_reconfigure ask for all parameters at once: an unset
+    one would empty the whole answer."""
+    import threading
+
+    from rcl_interfaces.srv import GetParameters, ListParameters
+    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.node import Node
+
+    context = graph[0].context
+    client = Node("parameter_client", context=context)
+    executor = MultiThreadedExecutor(context=context)
+    for node in (*graph, client):
+        executor.add_node(node)
+    spinning = threading.Thread(target=executor.spin, daemon=True)
+    spinning.start()
+
+    def call(srv, service, request):
+        c = client.create_client(srv, service)
+        assert c.wait_for_service(timeout_sec=20), service
+        done = threading.Event()
+        future = c.call_async(request)
+        future.add_done_callback(lambda _: done.set())
+        assert done.wait(20), service
+        return future.result()
+
+    try:
+        for node in graph:
+            name = node.get_fully_qualified_name()
+            names = call(ListParameters, f"{name}/list_parameters",
+                         ListParameters.Request()).result.names
+            assert "stiffness" in names or node.get_name() != "dynamics"
+            answer = call(GetParameters, f"{name}/get_parameters",
+                          GetParameters.Request(names=list(names)))
+            assert len(answer.values) == len(names), name
+            assert all(v.type != 0 for v in answer.values), name  # 0: PARAMETER_NOT_SET
+    finally:
+        executor.shutdown()

@@ -200,12 +200,15 @@ def status_value(v) -> str:
     return str(v)
 
 
-def event_fields(event) -> tuple:
-    """Message and key-values of one collision event's status: pair, time (s),
-    approach speed of Eq. (7) (m/s), distance (m); recordings carry the same."""
+def event_fields(event, origin: float = 0.0) -> tuple:
+    """Message and key-values of one collision event's status: pair, time ``t``
+    (s since the first sample the monitor checked) and ``stamp`` (s, the stream's
+    own clock: ``origin``, the stamp of that first sample, plus ``t``), approach
+    speed of Eq. (7) (m/s), distance (m); recordings carry the same."""
     speed = event.approach_speed if math.isfinite(event.approach_speed) else event.normal_speed
     return (f"collision between {event.names[0]} and {event.names[1]} at t = {event.t:.4f} s",
-            {"pair": list(event.names), "t": event.t, "approach_speed": speed,
+            {"pair": list(event.names), "t": event.t, "stamp": origin + event.t,
+             "approach_speed": speed,
              "normal_speed": event.normal_speed, "distance": event.distance,
              "contact_time": event.contact_time, "sample": event.sample,
              "point": [float(x) for x in event.point]})
@@ -238,24 +241,28 @@ def _number(text: str):
     return None if text in ("", "None") else float(text)
 
 
+def _integer(text: str):
+    return None if text in ("", "None") else int(text)
+
+
 def _pair(text: str):
     return text.split(",") if text else None
 
 
 #: How each key-value of an event, a verdict or an outcome reads back.
-_PARSERS = {"t": float, "approach_speed": float, "normal_speed": _number, "distance": float,
-            "contact_time": _number, "sample": int, "pair": _pair,
+_PARSERS = {"t": float, "stamp": float, "approach_speed": float, "normal_speed": _number, "distance": float,
+            "contact_time": _number, "sample": _integer, "pair": _pair,
             "point": lambda s: [float(x) for x in s.split(",")] if s else None,
-            "deployment": int, "origin": _number, "samples": int, "d": _number,
-            "d_pair": _pair, "d_time": _number, "distance_now": _number, "refused": int,
-            "gaps": int, "largest_gap": _number, "solved": lambda s: s.split(",") if s else [],
-            "measured": lambda s: s.split(",") if s else [], "expected": int,
+            "deployment": _integer, "origin": _number, "samples": _integer, "d": _number,
+            "d_pair": _pair, "d_time": _number, "distance_now": _number, "refused": _integer,
+            "gaps": _integer, "largest_gap": _number, "solved": lambda s: s.split(",") if s else [],
+            "measured": lambda s: s.split(",") if s else [], "expected": _integer,
             "since_last_sample": _number,
             "first_collision_pair": _pair, "first_collision_t": _number,
-            "success": lambda s: s == "True", "status": int, "time_to_flat": _number,
+            "success": lambda s: s == "True", "status": _integer, "time_to_flat": _number,
             "t_end": _number, "energy_balance_error": _number, "max_constraint_gap": _number,
-            "wall_time": _number, "nsteps": int, "publish_wall_time": _number,
-            "summary": json.loads, "evaluations": int, "best_f": float,
+            "wall_time": _number, "nsteps": _integer, "publish_wall_time": _number,
+            "summary": json.loads, "evaluations": _integer, "best_f": float,
             "feasible": lambda s: s == "True", "elapsed": float}
 
 

@@ -22,6 +22,7 @@ most once a second per kind, saying how many were held back.
 from __future__ import annotations
 
 import math
+import re
 import time
 
 import numpy as np
@@ -135,10 +136,10 @@ class CollisionMonitorNode(Node):
             deployments = stream.deployments
             found = stream.update(t, theta, omega)
         except PanelDeployError as e:
-            field = str(e).split(":", 1)[0][:40]
-            stream.refuse(field)
-            # One kind per field, whatever its values: a flood of one fault is throttled.
-            return self._warn(field, f"joint state skipped: {e}")
+            stream.refuse(str(e).split(":", 1)[0][:40])
+            # One kind per fault, whatever its values (names, numbers): a flood is throttled.
+            kind = re.sub(r"'[^']*'|\d+(\.\d*)?(e[-+]?\d+)?", "#", str(e))[:80]
+            return self._warn(kind, f"joint state skipped: {e}")
         self._arrived, self._qos_fault = time.monotonic(), None
         if stream.deployments != deployments:
             self._clear_markers()
@@ -152,7 +153,7 @@ class CollisionMonitorNode(Node):
             first = found[0] is stream.check.first_events[0]
             R, p = forward_kinematics(self.stream.model, theta)
             self.events.publish(messages.diagnostics(
-                t, *(messages.event_status(self.status_name, e) for e in found)))
+                t, *(messages.event_status(self.status_name, e, stream.origin) for e in found)))
             self.markers.publish(messages.collision_markers(self.stream.model, found[0], R, p))
             if first:  # the verdict turns ERROR now; later events leave it so (timer only)
                 self._publish_verdict()

@@ -112,8 +112,11 @@ class DynamicsNode(runtime.WorkerNode):
         self.start_job("the deployment", self.diagnostics, self._run, self.deployment, scene, params,
                        prefix)
         response.success = True
+        # It does not wait for subscribers: say how many will see it from the first sample.
         response.message = (f"deploying {scene.name or scene.source} to {scene.simulation.t_end:g} s "
-                            f"({scene.simulation.samples} samples)")
+                            f"({scene.simulation.samples} samples, "
+                            f"{self.joint_states.get_subscription_count()} joint_states "
+                            f"subscribers)")
         return response
 
     def _run(self, deployment, scene, params, prefix=""):

@@ -170,7 +170,7 @@ def diagnostics(t: float, *statuses) -> DiagnosticArray:
     return msg
 
 
-def event_status(name: str, event) -> DiagnosticStatus:
+def event_status(name: str, event, origin: float = 0.0) -> DiagnosticStatus:
     """One collision event's status named ``name``/event (the monitor's full
     name), with the fields recordings carry (``event_fields``)."""
-    return status(name + contract.EVENT_SUFFIX, ERROR, *event_fields(event))
+    return status(name + contract.EVENT_SUFFIX, ERROR, *event_fields(event, origin))

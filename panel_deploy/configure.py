@@ -104,6 +104,34 @@ def apply_stiffness(model: Model, stiffness, damping_ratio: float | None = None)
     return model.with_stiffness(k, c)
 
 
+def result_model(scene: Scene, model: Model, result_file) -> tuple:
+    """The one rule for a result file (``optimise --out``): its k per hinge, c
+    following k at the scene's c/k (Rayleigh damping, paper section 3.3), as the
+    dynamics node's ``stiffness`` and ``damping_ratio`` parameters do.
+
+    Returns ``(model, c_file)``: the model so damped, and the file's own c per
+    hinge (N m s/rad), so that a caller can say when it differs.
+
+    Raises
+    ------
+    OptimisationError
+        The file is missing, invalid, or not for this model's hinges.
+    """
+    from .optimise import load_hinges
+
+    k, c_file = load_hinges(result_file, model)
+    return apply_stiffness(model, k, scene.hinges.damping_ratio), c_file
+
+
+def damping_ratio_of(model: Model, c) -> float | None:
+    """The c/k (s) of damping ``c`` per hinge on ``model``'s k: the median over
+    sprung hinges (one value for a result of one damping ratio); None unsprung."""
+    sprung = model.stiffness > 0
+    if not sprung.any():
+        return None
+    return float(np.median(np.asarray(c, dtype=float)[sprung] / model.stiffness[sprung]))
+
+
 def _group_text(model, groups):
     return "; ".join(",".join(model.hinges[i].name for i in g) for g in groups)
 
@@ -150,15 +178,15 @@ def load_array(scene: str, stiffness_file: str = "") -> tuple:
     """What the ``array_model`` node publishes: ``(scene, model, scene_text)``.
 
     ``scene`` is a scene file or the name of a shipped scene; a
-    ``stiffness_file`` (an optimisation result) sets k per hinge, and the
-    scene text then carries it as ``hinges.overrides``.
+    ``stiffness_file`` (an optimisation result) sets k per hinge
+    (:func:`result_model`), and the scene text then carries it as
+    ``hinges.overrides``.
 
     Raises
     ------
     SceneError, OptimisationError
         The scene or the stiffness file is missing or invalid.
     """
-    from .optimise import load_hinges
     from .scene import load_scene, resolve_scene
 
     if not scene:
@@ -167,7 +195,6 @@ def load_array(scene: str, stiffness_file: str = "") -> tuple:
     model = build_model(parsed)
     if not stiffness_file:
         return parsed, model, scene_yaml(parsed)
-    k, _ = load_hinges(stiffness_file, model)
-    model = model.with_stiffness(k)
+    model = result_model(parsed, model, stiffness_file)[0]
     text = scene_yaml(parsed, model)
     return scene_from_yaml(text, source=parsed.source), model, text

@@ -17,9 +17,8 @@ def scene_model(scene, stiffness_file=None):
 
     model = build_model(scene)
     if stiffness_file:
-        from .optimise import load_hinges
-        k, c_file = load_hinges(stiffness_file, model)
-        model = model.with_stiffness(k)
+        from .configure import result_model
+        model, c_file = result_model(scene, model, stiffness_file)
         damping_note(model, c_file, stiffness_file)
     return model
 
@@ -44,16 +43,15 @@ def damping_note(model, c_file, stiffness_file):
     design under other dampers); a result optimised under another ratio then
     deploys differently, which deserves a word rather than silence.
     """
+    from .configure import damping_ratio_of
+
     c = np.array([h.c for h in model.hinges])
-    sprung = model.stiffness > 0
     # 1e-3: a ratio given to the note's four figures (--set hinges.damping_ratio=0.1864
     # for 0.18641...) is the result's own, and the note would print two equal numbers
-    if c_file is None or not sprung.any() or np.allclose(c_file, c, rtol=1e-3, atol=0.0):
+    if c_file is None or model.stiffness.max(initial=0) <= 0 or \
+            np.allclose(c_file, c, rtol=1e-3, atol=0.0):
         return
-
-    def ratio(damping):
-        return float(np.median(damping[sprung] / model.stiffness[sprung]))
-
-    print(f"panel-deploy: note: {stiffness_file} gives damping c/k = {ratio(c_file):.4g} s, "
-          f"the scene {ratio(c):.4g} s; simulating with the scene's (--set "
-          f"hinges.damping_ratio={ratio(c_file):.4g} simulates the result's)", file=sys.stderr)
+    ratio = damping_ratio_of(model, c_file)
+    print(f"panel-deploy: note: {stiffness_file} gives damping c/k = {ratio:.4g} s, "
+          f"the scene {damping_ratio_of(model, c):.4g} s; simulating with the scene's (--set "
+          f"hinges.damping_ratio={ratio:.4g} simulates the result's)", file=sys.stderr)

@@ -111,11 +111,23 @@ def record_deployment(path, scene, model):
 
 
 def record_optimum(path, scene, result_file):
-    """``optimise --record``: record the deployment of the K and c written to
-    ``result_file`` (the result of ``optimise --out``) with the scene's simulation settings."""
+    """``optimise --record``: record the deployment of the result written to
+    ``result_file`` (``optimise --out``) with the scene's simulation settings.
+
+    The result is deployed by the one rule for result files
+    (:func:`~panel_deploy.configure.result_model`) on the scene with the c/k the
+    search found (``hinges.damping_ratio``, when it searched one), so that the
+    recording's scene says what was deployed."""
     from ..build import build_model
-    from ..optimise import load_hinges
+    from ..configure import damping_ratio_of, result_model
+    from ..scene import apply_overrides, scene_from_dict
+    from ..scene_text import yaml_value
 
     model = build_model(scene)
-    k, c = load_hinges(result_file, model)
-    return record_deployment(path, scene, model.with_stiffness(k, c))
+    deployed, c_file = result_model(scene, model, result_file)
+    ratio = damping_ratio_of(deployed, c_file)
+    if ratio is not None and ratio != scene.hinges.damping_ratio:
+        scene = scene_from_dict(apply_overrides(
+            scene.data, [f"hinges.damping_ratio={yaml_value(ratio)}"]), source=scene.source)
+        deployed = result_model(scene, model, result_file)[0]
+    return record_deployment(path, scene, deployed)

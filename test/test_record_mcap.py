@@ -259,11 +259,13 @@ def test_collide_on_the_recording_reports_the_simulated_collision(recorded, caps
     assert math.isclose(got["d"], report.d, rel_tol=1e-12)
 
 
-def test_optimise_record_deploys_the_result_file(tmp_path):
-    """``optimise --record`` records the deployment of the K and c it wrote to --out."""
+@pytest.mark.parametrize("search", [[], ["--set", "optimisation.damping_ratio_bounds=[0.043,0.3]"]])
+def test_optimise_record_deploys_the_result_file(tmp_path, search):
+    """``optimise --record`` records the deployment of the K and c it wrote to --out
+    (with a searched c/k, the recording's scene carries it as hinges.damping_ratio)."""
     out, mcap = tmp_path / "k.yaml", tmp_path / "best.mcap"
     code = main(["optimise", "paper_4x4", "--max-evaluations", "4", "--workers", "1", "--quiet",
-                 "--out", str(out), "--record", str(mcap)])
+                 "--out", str(out), "--record", str(mcap), *search])
     assert code in (0, 1)
     hinges = yaml.safe_load(out.read_text())["hinges"]
     from panel_deploy.record import open_recording
@@ -271,7 +273,10 @@ def test_optimise_record_deploys_the_result_file(tmp_path):
     model = json.loads(recording.metadata["model"]["stiffness"]), \
         json.loads(recording.metadata["model"]["damping"])
     names = json.loads(recording.metadata["model"]["hinges"])
-    assert model == ([hinges[n]["k"] for n in names], [hinges[n]["c"] for n in names])
+    assert model[0] == [hinges[n]["k"] for n in names]
+    assert np.allclose(model[1], [hinges[n]["c"] for n in names], rtol=1e-12, atol=0)
+    ratio = hinges[names[0]]["c"] / hinges[names[0]]["k"]
+    assert recording.scene().hinges.damping_ratio == pytest.approx(ratio, rel=1e-12)
     rebuilt = build_model(recording.scene())
     assert [h.k for h in rebuilt.hinges] == model[0]
     assert recording.count("/joint_states") == 401

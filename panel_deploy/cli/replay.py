@@ -79,7 +79,8 @@ def replay_command(args) -> int:
         data = rrd.read(flush=True)
         write_atomic(args.save, lambda f: f.write(data), "--save", mode="wb")
     target = args.save or ("rerun " + sink.uri if args.serve else "the rerun viewer")
-    print(f"{frames} frames of {d.recording.path} -> {target}")
+    # flushed: with --serve this line (the address) must reach a pipe before the wait
+    print(f"{frames} frames of {d.recording.path} -> {target}", flush=True)
     d.print_notes()
     if args.serve:
         try:

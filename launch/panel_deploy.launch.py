@@ -35,8 +35,8 @@ def generate_launch_description():
         DeclareLaunchArgument("namespace", default_value="",
                               description="namespace of the four nodes (one per array)"),
         DeclareLaunchArgument("frame_prefix", default_value="",
-                              description="prefix of the /tf frames (e.g. array1/ with "
-                                          "namespace:=array1: /tf is global)"),
+                              description="prefix of the /tf frames and the markers (e.g. "
+                                          "array1/ with namespace:=array1: /tf is global)"),
     ]
     sim_time = ParameterValue(LaunchConfiguration("use_sim_time"), value_type=bool)
     overrides = {
@@ -45,6 +45,7 @@ def generate_launch_description():
                      "real_time_factor": ParameterValue(LaunchConfiguration("real_time_factor"),
                                                         value_type=float),
                      "frame_prefix": LaunchConfiguration("frame_prefix")},
+        "collision_monitor": {"frame_prefix": LaunchConfiguration("frame_prefix")},
     }
     nodes = [Node(package="panel_deploy", executable=name, name=name, output="screen",
                   namespace=LaunchConfiguration("namespace"),

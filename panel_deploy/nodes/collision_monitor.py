@@ -50,6 +50,7 @@ PARAMETERS = {
     "stamps": ("", "header: a joint state's time is its header.stamp; receipt: the time it "
                    "arrived (drivers that leave stamps unfilled); empty: the scene's "
                    "collision.stamps"),
+    runtime.FRAME_PREFIX: ("", runtime.FRAME_PREFIX_DOC),
 }
 #: s between verdicts on /diagnostics.
 VERDICT_PERIOD = 0.25
@@ -59,7 +60,8 @@ STALL_S = 0.5
 STALL_INTERVALS = 20.0
 #: The scene's collision keys a parameter overrides when it holds no "the scene's" value.
 _OVERRIDES = {"tolerance": lambda v: v >= 0, "noise": lambda v: v >= 0,
-              "speed_interval": lambda v: v >= 0, "stamps": bool, "refine": lambda v: True}
+              "speed_interval": lambda v: v >= 0, "stamps": bool, "refine": lambda v: True,
+              runtime.FRAME_PREFIX: lambda v: False}
 
 
 class CollisionMonitorNode(Node):
@@ -92,6 +94,7 @@ class CollisionMonitorNode(Node):
     def _collision(self, changes=None) -> tuple:
         """``(settings, receipt)``: the scene's collision settings with the
         parameters that override them, and whether stamps are arrival times."""
+        runtime.check_frame_prefix(changes or {})
         p = {**runtime.values(self, PARAMETERS), **(changes or {})}
         given = {k: v for k, v in p.items() if _OVERRIDES[k](v)}
         if given.get("stamps", "header") not in ("header", "receipt"):
@@ -154,7 +157,8 @@ class CollisionMonitorNode(Node):
             R, p = forward_kinematics(self.stream.model, theta)
             self.events.publish(messages.diagnostics(
                 t, *(messages.event_status(self.status_name, e, stream.origin) for e in found)))
-            self.markers.publish(messages.collision_markers(self.stream.model, found[0], R, p))
+            self.markers.publish(messages.collision_markers(
+                self.stream.model, found[0], R, p, t, self._frame()))
             if first:  # the verdict turns ERROR now; later events leave it so (timer only)
                 self._publish_verdict()
 
@@ -222,9 +226,13 @@ class CollisionMonitorNode(Node):
         return (f"stream stalled: no joint state for {silent:.1f} s since t = "
                 f"{stream.last_stamp - stream.origin:.4f} s, the array not flat")
 
+    def _frame(self) -> str:
+        """The ground frame the markers are drawn in: ``frame_prefix`` + ``world``."""
+        return self.get_parameter(runtime.FRAME_PREFIX).value + contract.WORLD
+
     def _clear_markers(self):
         """Take the last deployment's collision markers off displays."""
-        self.markers.publish(messages.clear_markers())
+        self.markers.publish(messages.clear_markers(self._frame()))
 
     def _reset(self, request, response):
         if self.stream is None:

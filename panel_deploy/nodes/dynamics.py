@@ -26,7 +26,7 @@ from rclpy.parameter import Parameter
 
 from .. import contract
 from ..contract.cdr import SampleEncoder
-from ..errors import PanelDeployError, shown
+from ..errors import PanelDeployError
 from ..dynamics.deployment import Deployment
 from ..configure import DynamicsParameters, configure
 from ..timing import Pacer
@@ -45,16 +45,14 @@ _DOC = {
     "real_time_factor": "simulated seconds per wall second; 0: as fast as computed",
 }
 #: The node's own parameter, beside DynamicsParameters'.
-FRAME_PREFIX = "frame_prefix"
-_FRAME_DOC = ("prefix of every frame on /tf, /tf_static and the panel markers (like "
-              "robot_state_publisher's): two arrays side by side, e.g. 'array1/'")
+FRAME_PREFIX = runtime.FRAME_PREFIX
 #: Ranges ``ros2 param describe`` shows; the rest of each check is DynamicsParameters'.
 _RANGE = {"rtol": (0.0, 1.0), "t_end": (0.0, 600.0), "rate_hz": (1e-3, 1e6),
           "real_time_factor": (0.0, math.inf)}
 PARAMETERS = {f.name: (Parameter.Type.DOUBLE_ARRAY if f.name == "stiffness" else f.default,
                        _DOC[f.name], *([_RANGE[f.name]] if f.name in _RANGE else []))
               for f in fields(DynamicsParameters)}
-PARAMETERS[FRAME_PREFIX] = ("", _FRAME_DOC)
+PARAMETERS[FRAME_PREFIX] = ("", runtime.FRAME_PREFIX_DOC)
 #: /panel_deploy/panels per wall second at most (and always the last sample).
 PANEL_RATE = 30.0
 
@@ -88,10 +86,7 @@ class DynamicsNode(runtime.WorkerNode):
         return DynamicsParameters(**current)
 
     def _check(self, changes):
-        prefix = changes.get(FRAME_PREFIX, "")
-        if prefix.startswith("/") or any(c.isspace() for c in prefix):
-            raise PanelDeployError(f"{FRAME_PREFIX}: {shown(prefix)}: tf2 frames start with no '/' "
-                                   "and hold no spaces")
+        runtime.check_frame_prefix(changes)
         params = self.parameters(changes)
         if self.scene is not None:  # counts and values the scene must accept
             configure(self.scene, params)

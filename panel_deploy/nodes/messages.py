@@ -126,9 +126,11 @@ def _box(model, body, rotation, position, t, ns, colour, frame=FRAME) -> Marker:
     return m
 
 
-def collision_markers(model, event, rotation, position) -> MarkerArray:
-    """The colliding pair in red at the instant of the event, and the contact point."""
-    boxes = [_box(model, b, rotation, position, event.t, "collision", HIT_COLOUR)
+def collision_markers(model, event, rotation, position, stamp_s: float,
+                      frame: str = FRAME) -> MarkerArray:
+    """The colliding pair in red at the instant of the event, and the contact point,
+    in ``frame``, stamped ``stamp_s`` (s, the stream's clock)."""
+    boxes = [_box(model, b, rotation, position, stamp_s, "collision", HIT_COLOUR, frame)
              for b in event.bodies]
     point = Marker()
     point.header = boxes[0].header
@@ -141,10 +143,10 @@ def collision_markers(model, event, rotation, position) -> MarkerArray:
     return MarkerArray(markers=boxes + [point])
 
 
-def clear_markers() -> MarkerArray:
+def clear_markers(frame: str = FRAME) -> MarkerArray:
     """DELETEALL: every marker of the topic's publisher off the display."""
     m = Marker()
-    m.header.frame_id = FRAME
+    m.header.frame_id = frame
     m.action = Marker.DELETEALL
     return MarkerArray(markers=[m])
 

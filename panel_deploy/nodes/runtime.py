@@ -133,6 +133,20 @@ def subscription(node, topic: contract.Topic, callback, **kwargs):
                                     messages.qos(topic.qos), **kwargs)
 
 
+#: The parameter that puts a prefix before every frame a node sends (``array1/``).
+FRAME_PREFIX = "frame_prefix"
+FRAME_PREFIX_DOC = ("prefix of every frame on /tf, /tf_static and the markers (like "
+                    "robot_state_publisher's): two arrays side by side, e.g. 'array1/'")
+
+
+def check_frame_prefix(changes) -> None:
+    """Refuse a ``frame_prefix`` among ``changes`` that tf2 frames cannot start with."""
+    prefix = changes.get(FRAME_PREFIX, "")
+    if prefix.startswith("/") or any(c.isspace() for c in prefix):
+        raise PanelDeployError(f"{FRAME_PREFIX}: {shown(prefix)}: tf2 frames start with no '/' "
+                               "and hold no spaces")
+
+
 def trigger_service(node, service: contract.Service, callback):
     """``node``'s ``std_srvs/Trigger`` service of the contract (``~/`` + its name),
     whose callback cannot leave a caller without an answer: an unexpected

@@ -1,0 +1,139 @@
+"""The collision_monitor node as a test stand sees it: event latency and sustained rate.
+
+    python bench/bench_monitor_latency.py [--repeats N] [--rates 1000,2000,10000]
+
+The node runs as its own process (with array_model); this process publishes the paper's
+uniform deployment (it collides at 0.416 s) as JointStates paced in real time at each
+rate, with every hinge ("full") or without the loop hinge r2c1-r3c1 ("partial": solved
+from the loop closure), and measures
+
+- latency: from publishing the sample that reveals the first collision (the event's
+  ``sample``) to receiving its event on ``panel_deploy/collision_events``; median and the
+  largest of the repeats (with 5 repeats the largest stands for the 99th percentile);
+- sustained rate: samples the monitor checked (its verdict's ``samples``) per second of
+  stream, and how long after the last message the last one was checked; when it falls
+  behind, how many it checked of those sent.
+
+Wall clock on 2 shared cores: medians and ratios within one run, never targets in tests.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "test"))
+
+import ros_env  # noqa: E402
+
+ros_env.isolate()  # DDS stays on this machine (before rclpy starts)
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from ros_harness import Client, NodeProcess, wait_for  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from panel_deploy import contract  # noqa: E402
+from panel_deploy.configure import DynamicsParameters, configure  # noqa: E402
+from panel_deploy.dynamics import simulate  # noqa: E402
+from panel_deploy.dynamics.report import hinge_states  # noqa: E402
+from panel_deploy.nodes import messages  # noqa: E402
+from panel_deploy.scene import load_scene, resolve_scene  # noqa: E402
+
+T_END = 0.6
+LEFT_OUT = "r2c1-r3c1"
+
+
+def stream(rate_hz, partial):
+    """The JointStates of the paper deployment at ``rate_hz`` (every hinge, or all but LEFT_OUT)."""
+    scene, model = configure(load_scene(resolve_scene("paper_4x4")),
+                             DynamicsParameters(t_end=T_END, rate_hz=rate_hz))
+    result = simulate(model, scene.simulation)
+    names, theta, omega, torque = hinge_states(model, result)
+    keep = [i for i, n in enumerate(names) if not (partial and n == LEFT_OUT)]
+    return result.t, [messages.joint_state([names[i] for i in keep], result.t[j], theta[j, keep],
+                                           omega[j, keep], torque[j, keep])
+                      for j in range(len(result.t))]
+
+
+def once(client, publisher, events, diagnostics, t, msgs):
+    """One paced run: (latency s or None, samples checked, s from last message to last check)."""
+    assert client.trigger("/collision_monitor/reset").success
+    events.clear()
+    diagnostics.clear()
+    sent = np.zeros(len(msgs))
+    start = time.perf_counter()
+    for j, msg in enumerate(msgs):
+        ahead = start + t[j] - time.perf_counter()
+        if ahead > 0.001:  # sleep, not spin: a busy loop would take a core from the monitor
+            time.sleep(ahead)
+        sent[j] = time.perf_counter()
+        publisher.publish(msg)
+    last_sent = time.perf_counter()
+
+    def checked():
+        return max([int(kv.value) for d in list(diagnostics) for s in d.status for kv in s.values
+                    if kv.key == "samples" and s.name == "/collision_monitor"] or [0])
+
+    seen, still = -1, time.perf_counter()
+    while checked() < len(msgs) and time.perf_counter() - still < 5.0:
+        if checked() != seen:
+            seen, still = checked(), time.perf_counter()
+        time.sleep(0.02)
+    done = time.perf_counter() - last_sent
+    latency = None
+    if events and client.arrivals:
+        sample = int(next(kv.value for kv in events[0].status[0].values if kv.key == "sample"))
+        latency = client.arrivals[0] - sent[sample]
+    return latency, checked(), done
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--rates", default="1000,2000,10000")
+    args = p.parse_args(argv)
+    procs = [NodeProcess("array_model", "scene:=paper_4x4"), NodeProcess("collision_monitor")]
+    client = Client("bench_monitor_latency")
+    client.arrivals = []
+    try:
+        publisher = client.node.create_publisher(JointState, "/joint_states",
+                                                 messages.qos(contract.STREAM))
+        diagnostics = client.listen(DiagnosticArray, "/diagnostics")
+        events = client.listen(DiagnosticArray, "/panel_deploy/collision_events")
+        client.node.create_subscription(
+            DiagnosticArray, "/panel_deploy/collision_events",
+            lambda _: client.arrivals.append(time.perf_counter()), messages.qos(contract.EVENTS))
+        wait_for(lambda: publisher.get_subscription_count() >= 1, timeout=60, what="the monitor")
+        wait_for(lambda: diagnostics, timeout=60, what="the model at the monitor")
+        print(f"paper deployment to {T_END} s (first collision at 0.416 s), paced in real time; "
+              f"{args.repeats} runs each")
+        print(f"{'rate':>7} {'sensing':>8} {'latency median':>15} {'largest':>9} "
+              f"{'checked':>15} {'rate kept':>10} {'last check after':>17}")
+        for rate in (float(r) for r in args.rates.split(",")):
+            for partial in (False, True):
+                t, msgs = stream(rate, partial)
+                runs = []
+                for _ in range(args.repeats):
+                    client.arrivals.clear()
+                    runs.append(once(client, publisher, events, diagnostics, t, msgs))
+                lat = [r[0] for r in runs if r[0] is not None]
+                checked = int(np.median([r[1] for r in runs]))
+                after = float(np.median([r[2] for r in runs]))
+                kept = checked / (T_END + after)
+                print(f"{rate:7.0f} {'partial' if partial else 'full':>8} "
+                      f"{(f'{np.median(lat) * 1e3:.1f} ms' if lat else 'no event'):>15} "
+                      f"{(f'{max(lat) * 1e3:.0f} ms' if lat else '-'):>9} "
+                      f"{checked:>7} of {len(msgs):<6} {kept:8.0f}/s {after:15.2f} s")
+    finally:
+        client.close()
+        for proc in procs:
+            proc.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

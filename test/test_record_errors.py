@@ -6,6 +6,7 @@ written by rosbags), without velocities, stamped with wall-clock time.
 """
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -332,14 +333,23 @@ def test_a_cut_recording_and_a_wrong_flag_are_one_line(recording, tmp_path, caps
     assert "is truncated" in capsys.readouterr().err  # the note, once the work is done
 
 
-def test_a_recording_cut_before_its_first_chunk_says_so(recording, tmp_path, capsys):
-    cut = tmp_path / "early.part.mcap"
-    data = recording.read_bytes()
-    first_chunk = data.index(b"\x06", 8)  # opcode CHUNK: cut just after it starts
-    cut.write_bytes(data[:first_chunk + 100])
-    assert main(["collide", str(cut)]) == 2
-    err = capsys.readouterr().err
-    assert "no messages in this recording" in err or "cut short" in err, err
+def test_a_recording_cut_before_its_scene_says_it_was_cut(tmp_path, capsys):
+    """Joint states in the chunks that closed, the scene in the one the kill cut."""
+    path = tmp_path / "early.part.mcap"
+    with Recorder(path, chunk_span=0.01) as rec:
+        for j in range(5):
+            rec.write("/joint_states", m.JOINT_STATE,
+                      m.joint_state(["a"], j * 0.01, [0.0], [0.0], [0.0]), j * 10_000_000)
+        rec.flush()
+        first = os.path.getsize(rec.partial)
+        rec.write("/panel_deploy/model", m.STRING, m.string("name: x\n" * 1000), 60_000_000)
+        rec.flush()
+    data = path.read_bytes()
+    path.write_bytes(data[:first + 20])  # inside the scene's chunk
+    assert main(["collide", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no /panel_deploy/model in this recording (the file was cut short" \
+        in err[0] and "--scene" in err[0], err
 
 
 @pytest.mark.parametrize("kind", ["folder", "db3"])

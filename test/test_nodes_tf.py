@@ -14,7 +14,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 from rosbags.typesys import Stores, get_typestore  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from panel_deploy import contract
+from panel_deploy import contract  # noqa: E402
 from panel_deploy.build import build_model  # noqa: E402
 from panel_deploy.export.urdf import link_poses  # noqa: E402
 from panel_deploy.kinematics import forward_kinematics  # noqa: E402

@@ -17,6 +17,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from .. import contract
 from ..contract import nanoseconds
+# The contract's type names and levels, here too for readers of recordings (m.JOINT_STATE).
 from ..contract import (CLOCK, DIAGNOSTIC_ARRAY, ERROR, JOINT_STATE, MARKER_ARRAY,  # noqa: F401
                         HIT_COLOUR, OK, PANEL_COLOUR, STRING, TF_MESSAGE, WARN, WORLD, event_fields)
 from ..frames import quaternions
@@ -26,6 +27,7 @@ _T = TYPESTORE.types
 
 #: The recorded topics, by resolved name in the root namespace: (type, QoS).
 TOPICS = {contract.resolve(t.name): (t.type, t.qos) for t in contract.TOPICS}
+
 
 def serialize(message) -> bytes:
     """CDR bytes (little endian, with the encapsulation header) of a rosbags message."""

@@ -178,6 +178,9 @@ def test_noise_setting_is_checked():
         CollisionSettings(noise=-1e-3)
     with pytest.raises(Exception, match="collision.noise"):
         CollisionSettings(noise=math.inf)
+    with pytest.raises(Exception, match="collision.noise: expected a standard deviation of at most"):
+        CollisionSettings(noise=0.1001)
+    assert CollisionSettings(noise=0.1).noise == 0.1  # the scene key's whole range is accepted
 
 
 @pytest.fixture(scope="module")

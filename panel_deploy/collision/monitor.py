@@ -172,9 +172,9 @@ class CollisionSettings:
             v = getattr(self, f)
             if not v >= 0 or (f in ("resolution", "time_resolution") and v == 0):
                 raise SceneError(f"collision.{f}", f"expected a number > 0, got {shown(v)}")
-        if not (math.isfinite(self.noise) and self.noise < 0.1):
-            raise SceneError("collision.noise", f"expected a standard deviation below 0.1 rad, "
-                                                f"got {shown(self.noise)}")
+        if not (math.isfinite(self.noise) and self.noise <= 0.1):  # as the scene key's range
+            raise SceneError("collision.noise", f"expected a standard deviation of at most 0.1 "
+                                                f"rad, got {shown(self.noise)}")
         if not math.isfinite(self.speed_interval):
             raise SceneError("collision.speed_interval", "expected a finite number of s, got inf")
         if self.margin < self.tolerance:

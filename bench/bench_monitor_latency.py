@@ -33,7 +33,7 @@ import ros_env  # noqa: E402
 ros_env.isolate()  # DDS stays on this machine (before rclpy starts)
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from ros_harness import Client, NodeProcess, wait_for  # noqa: E402
+from ros_harness import Client, NodeProcess, checked_samples, wait_for  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from panel_deploy import contract  # noqa: E402
@@ -73,22 +73,13 @@ def once(client, publisher, events, diagnostics, t, msgs):
         sent[j] = time.perf_counter()
         publisher.publish(msg)
     last_sent = time.perf_counter()
-
-    def checked():
-        return max([int(kv.value) for d in list(diagnostics) for s in d.status for kv in s.values
-                    if kv.key == "samples" and s.name == "/collision_monitor"] or [0])
-
-    seen, still = -1, time.perf_counter()
-    while checked() < len(msgs) and time.perf_counter() - still < 5.0:
-        if checked() != seen:
-            seen, still = checked(), time.perf_counter()
-        time.sleep(0.02)
+    checked = checked_samples(diagnostics, len(msgs))
     done = time.perf_counter() - last_sent
     latency = None
     if events and client.arrivals:
         sample = int(next(kv.value for kv in events[0].status[0].values if kv.key == "sample"))
         latency = client.arrivals[0] - sent[sample]
-    return latency, checked(), done
+    return latency, checked, done
 
 
 def main(argv=None) -> int:

@@ -38,8 +38,9 @@ from panel_deploy.dynamics import simulate  # noqa: E402
 from panel_deploy.dynamics.report import hinge_states  # noqa: E402
 from panel_deploy.configure import DynamicsParameters, configure  # noqa: E402
 from panel_deploy.nodes import messages  # noqa: E402
+from panel_deploy.nodes.collision_monitor import VERDICT_PERIOD  # noqa: E402
 from panel_deploy.scene import load_scene, resolve_scene  # noqa: E402
-from ros_harness import Client, NodeProcess, wait_for  # noqa: E402
+from ros_harness import Client, NodeProcess, checked_samples, wait_for  # noqa: E402
 
 
 def paper(rate_hz, t_end=None):
@@ -121,21 +122,12 @@ def monitor_live(client, msgs, rate_hz=1000.0):
             time.sleep(ahead)
         publisher.publish(msg)
     sent = time.perf_counter()
-
-    def checked():
-        return max([int(kv.value) for d in diagnostics for st in d.status for kv in st.values
-                    if kv.key == "samples"] or [0])
-
     # Until every sample is checked, or nothing moved for 10 s (then say how many were).
-    last, still = -1, time.perf_counter()
-    while checked() < len(msgs) and time.perf_counter() - still < 10.0:
-        if checked() != last:
-            last, still = checked(), time.perf_counter()
-        time.sleep(0.1)
+    checked = checked_samples(diagnostics, len(msgs), idle=10.0)
     lag = time.perf_counter() - sent
-    print(f"  live, node process fed at {rate_hz:g} Hz for {sent - start:.2f} s: {checked()} of "
+    print(f"  live, node process fed at {rate_hz:g} Hz for {sent - start:.2f} s: {checked} of "
           f"{len(msgs)} samples checked, the last {lag:.2f} s after the last message "
-          f"(verdicts go out every 0.5 s)")
+          f"(verdicts go out every {VERDICT_PERIOD:g} s)")
 
 
 def event_latency(client):

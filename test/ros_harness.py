@@ -36,6 +36,21 @@ def wait_for(condition, timeout=60.0, what="condition"):
         time.sleep(0.02)
 
 
+def checked_samples(diagnostics, count, idle=5.0, status="/collision_monitor") -> int:
+    """The samples the monitor's verdicts on ``diagnostics`` (a :meth:`Client.listen` list)
+    say it checked, once that reaches ``count`` or has not moved for ``idle`` s."""
+    def checked():
+        return max([int(kv.value) for d in list(diagnostics) for s in d.status for kv in s.values
+                    if kv.key == "samples" and s.name == status] or [0])
+
+    seen, still = -1, time.monotonic()
+    while checked() < count and time.monotonic() - still < idle:
+        if checked() != seen:
+            seen, still = checked(), time.monotonic()
+        time.sleep(0.02)
+    return checked()
+
+
 class Client:
     """A node in the test process with a spinning executor; collects messages."""
 

@@ -4,13 +4,17 @@ No rclpy here: messages are built and decoded with the ``rosbags`` ROS 2
 Jazzy type store, files written by :mod:`.mcap_file` and read with the
 ``mcap`` library's record parsers.
 
-- :mod:`.messages`: the topics, their types, and the messages built from core values.
-- :mod:`.cdr`: the per-sample messages encoded fast, from precomputed layouts.
+Topics, QoS and the per-sample wire bytes are the contract's
+(:mod:`panel_deploy.contract`, :mod:`panel_deploy.contract.cdr`).
+
+- :mod:`.messages`: the other messages as rosbags messages, their CDR bytes and schemas.
 - :mod:`.writer`: :class:`Recorder`, a ROS 2 recording laid out as rosbag2's MCAP
-  storage writes it, on :mod:`.mcap_file` (chunks, indexes, summary).
+  storage writes it, on :mod:`.mcap_file` (chunks, indexes, summary), and
+  :class:`~.writer.DeploymentWriter`, the one recording path of every command and node.
 - :mod:`.deployment`: ``simulate --record`` and ``optimise --record``.
 - :mod:`.reader`: :func:`open_recording`, :func:`joint_states`, :func:`hinge_track`.
-- :mod:`.analysis`: ``collide FILE.mcap`` and what ``replay`` needs from a recording.
+- :mod:`.analysis`: the scene a recording ran, ``collide FILE.mcap`` (the monitor's
+  check) and what ``replay`` needs from a recording.
 - :mod:`.replay`: ``replay`` to rerun; :mod:`.strip`: ``replay --png``.
 """
 

@@ -3,7 +3,8 @@
     ros2 launch panel_deploy panel_deploy.launch.py scene:=paper_4x4 real_time_factor:=1.0
 
 Arguments: scene, rate_hz, real_time_factor, use_sim_time, namespace, frame_prefix. Then
-``ros2 service call /dynamics/deploy std_srvs/srv/Trigger`` deploys the array;
+``ros2 action send_goal /dynamics/deploy panel_deploy_interfaces/action/Deploy
+"{wait_for_subscribers: 1}" --feedback`` deploys the array;
 with ``namespace:=array1`` every topic and service but /diagnostics, /clock,
 /tf and /tf_static is under /array1, so that several arrays run side by side
 (``frame_prefix:=array1/`` keeps their frames apart on the global /tf).

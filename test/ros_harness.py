@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import rclpy
+from rclpy.action import ActionClient
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from std_srvs.srv import Trigger
@@ -96,12 +97,77 @@ class Client:
     def trigger(self, service):
         return self.call(Trigger, service)
 
+    def send_goal(self, action: contract.Service, node: str, timeout=60.0, **fields) -> "Goal":
+        """A goal of ``action`` sent to the server of ``node`` (its full name), accepted."""
+        action_type = messages.message_class(action.type)
+        key = (action_type, f"{node}/{action.name}")
+        if key not in self._clients:
+            self._clients[key] = ActionClient(self.node, action_type, key[1])
+        client = self._clients[key]
+        assert client.wait_for_server(timeout_sec=timeout), f"{key[1]} not available"
+        goal = Goal()
+        future = client.send_goal_async(action_type.Goal(**fields),
+                                        feedback_callback=lambda f: goal.feedback.append(f.feedback))
+        done = threading.Event()
+        future.add_done_callback(lambda _: done.set())
+        assert done.wait(timeout), f"{key[1]} did not answer"
+        goal.start(future.result())
+        return goal
+
+    def start_goal(self, action: contract.Service, node: str, **fields) -> "Goal":
+        """A goal that has started (its first feedback came) or ended, sent again
+        while it is aborted because the model has not reached ``node`` yet."""
+        goals = []
+
+        def attempt():
+            goals.append(self.send_goal(action, node, **fields))
+            wait_for(lambda: goals[-1].feedback or goals[-1].done(), what="the goal to start")
+            return not goals[-1].done() or "no model" not in goals[-1].result().message
+        wait_for(attempt, timeout=60, what=f"the model to reach {node}")
+        return goals[-1]
+
     def close(self):
         self._closing.set()
         self._thread.join(timeout=5.0)
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
+
+
+class Goal:
+    """An accepted action goal: its feedback so far and its result."""
+
+    def __init__(self):
+        self.feedback = []
+        self.handle = self._result = None
+        self._done = threading.Event()
+
+    def start(self, handle):
+        assert handle.accepted, "goal rejected"
+        self.handle = handle
+        self._result = handle.get_result_async()
+        self._result.add_done_callback(lambda _: self._done.set())
+
+    def done(self) -> bool:
+        return self._done.is_set()
+
+    def result(self, timeout=120.0):
+        """The goal's result message (waits up to ``timeout`` s)."""
+        assert self._done.wait(timeout), "no result"
+        return self._result.result().result
+
+    @property
+    def status(self) -> int:
+        """action_msgs/GoalStatus of the ended goal (4 succeeded, 5 canceled, 6 aborted)."""
+        assert self._done.is_set()
+        return self._result.result().status
+
+    def cancel(self, timeout=30.0):
+        done = threading.Event()
+        future = self.handle.cancel_goal_async()
+        future.add_done_callback(lambda _: done.set())
+        assert done.wait(timeout), "the cancel was not answered"
+        return future.result()
 
 
 class NodeProcess:

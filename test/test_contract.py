@@ -21,7 +21,7 @@ def _names():
         node, _, rest = topic.name.partition("/")
         if node in contract.NODES:
             names.add("~/" + rest)
-    for service in contract.SERVICES:
+    for service in contract.SERVICES + contract.ACTIONS:
         names |= {service.path, "/" + service.path, "~/" + service.name}
     return names
 
@@ -67,9 +67,9 @@ def test_names_resolve_in_a_namespace():
 
 
 def test_typed_values_read_back():
-    v = contract.parse_values({"t": "0.416", "pair": "a,b", "d": "", "samples": "401",
+    v = contract.parse_values({"t": "0.416", "d_pair": "a,b", "d": "", "samples": "401",
                                "success": "True", "summary": '{"x": 1}', "other": "text"})
-    assert v == {"t": 0.416, "pair": ["a", "b"], "d": None, "samples": 401, "success": True,
+    assert v == {"t": 0.416, "d_pair": ["a", "b"], "d": None, "samples": 401, "success": True,
                  "summary": {"x": 1}, "other": "text"}
     assert contract.status_value(None) == "" and contract.status_value(0.1) == "0.1"
 
@@ -93,15 +93,12 @@ def graph():
 
 
 def test_live_nodes_publish_the_contract_with_its_qos(graph):
-    from panel_deploy.nodes.messages import TFMessage
-
-    expected = {contract.resolve(t.name): t for t in contract.TOPICS
-                if TFMessage is not None or t.type != contract.TF_MESSAGE}
+    expected = {contract.resolve(t.name): t for t in contract.TOPICS}
     seen = {}
     for node in graph:
         for name, types in node.get_publisher_names_and_types_by_node(node.get_name(), "/"):
-            if name in ("/rosout", "/parameter_events"):
-                continue  # every rclpy node's own
+            if name in ("/rosout", "/parameter_events") or "/_action/" in name:
+                continue  # every rclpy node's own, and the actions' (checked below)
             assert name in expected, f"{node.get_name()} publishes {name}, not in the contract"
             assert types == [expected[name].type]
             seen[name] = node.get_name()
@@ -109,17 +106,34 @@ def test_live_nodes_publish_the_contract_with_its_qos(graph):
     for node in graph:
         for publisher in node.publishers:
             name = publisher.topic_name
-            if name in ("/rosout", "/parameter_events"):
+            if name in ("/rosout", "/parameter_events") or "/_action/" in name:
                 continue
             qos, topic = publisher.qos_profile, expected[name]
             assert qos.depth == topic.qos.depth, name
             assert qos.durability.name.lower() == topic.qos.durability, name
             assert qos.reliability.name.lower() == topic.qos.reliability, name
-    for node, services in ((graph[0], [contract.RELOAD]), (graph[1], [contract.DEPLOY, contract.STOP]),
-                           (graph[2], [contract.RESET]),
-                           (graph[3], [contract.OPTIMISE, contract.CANCEL])):
+    for node, services in ((graph[0], [contract.RELOAD]), (graph[2], [contract.RESET])):
         offered = {name for name, _ in node.get_service_names_and_types_by_node(node.get_name(), "/")}
         assert {"/" + s.path for s in services} <= offered
+    from rclpy.action import get_action_server_names_and_types_by_node
+
+    for node, action in ((graph[1], contract.DEPLOY), (graph[3], contract.OPTIMISE)):
+        offered = dict(get_action_server_names_and_types_by_node(node, node.get_name(), "/"))
+        assert offered == {"/" + action.path: [action.type]}
+
+
+def test_message_fields_come_from_the_verdict_values_and_back():
+    values = {"deployment": 1, "origin": 2.5, "t": 0.4, "samples": 81, "d": None,
+              "d_pair": [], "measured": ["a", "b"], "solved": [], "expected": None,
+              "first_collision_pair": ["p", "q"], "first_collision_t": 0.416,
+              "approach_speed": 4.2, "refused": 3}
+    fields = contract.verdict_message(2, "collision", values)
+    assert fields["expected"] == -1 and fields["skipped"] == 0
+    from types import SimpleNamespace
+    back = contract.verdict_values(SimpleNamespace(**fields))
+    assert back["d"] is None and back["d_pair"] is None and back["expected"] is None
+    assert back["first_collision_pair"] == ["p", "q"] and back["samples"] == 81
+    assert back["origin"] == 2.5 and back["refused"] == 3 and back["level"] == 2
 
 
 def test_a_recording_offers_each_topic_with_the_live_qos(tmp_path):

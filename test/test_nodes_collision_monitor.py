@@ -4,6 +4,7 @@ import math
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+from panel_deploy_interfaces.msg import CollisionEvent, MonitorVerdict
 from hostile import alias_bomb
 from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
@@ -38,14 +39,15 @@ def graph(compiled_nodes):
     monitor = NodeProcess("collision_monitor")
     client = Client("monitor_test")
     publisher = client.node.create_publisher(JointState, "/joint_states", messages.qos(contract.STREAM))
-    events = client.listen(DiagnosticArray, "/panel_deploy/collision_events")
+    events = client.listen(CollisionEvent, "/panel_deploy/collision_events")
+    verdicts = client.listen(MonitorVerdict, "/collision_monitor/verdict", messages.qos(contract.LATCHED))
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")
     markers = client.listen(MarkerArray, "/panel_deploy/collision_markers")
     wait_for(lambda: publisher.get_subscription_count() >= 1, timeout=60, what="the monitor")
     # The monitor warns about joint states until the model has reached it.
     wait_for(lambda: any(s.name == STATUS and s.message in ("waiting for joint states", "no collision")
                          for d in diagnostics for s in d.status), timeout=60, what="the model")
-    yield client, publisher, events, diagnostics, markers
+    yield client, publisher, events, diagnostics, markers, verdicts
     client.close()
     for p in (model, monitor):
         code, seconds, err = p.stop()
@@ -70,23 +72,30 @@ def statuses(diagnostics, level=None):
 
 
 def test_first_event_names_the_pair_simulate_finds(graph, deployment):
-    client, publisher, events, diagnostics, markers = graph
+    client, publisher, events, diagnostics, markers, verdicts = graph
     model, result, report = deployment
     events.clear()
     feed(publisher, model, result, range(len(result.t)))
     wait_for(lambda: events, what="a collision event")
-    first = events[0].status[0]
-    values = {kv.key: kv.value for kv in first.values}
-    assert values["pair"] == ",".join(report.first_collision.names)
+    first = events[0]
+    assert (first.body_a, first.body_b) == report.first_collision.names
     dt = result.t[1] - result.t[0]
-    assert abs(float(values["t"]) - report.first_collision.t) <= dt
-    assert float(values["approach_speed"]) == pytest.approx(report.v, rel=1e-6)
+    assert abs(first.t - report.first_collision.t) <= dt
+    assert messages.seconds(first.header.stamp) == pytest.approx(first.t)  # stamps from 0 here
+    assert first.approach_speed == pytest.approx(report.v, rel=1e-6)
     # The first markers that show a pair (a new deployment first clears the last one's).
     hits = lambda: [a for a in markers if any(m.ns == "collision" for m in a.markers)]  # noqa: E731
     wait_for(hits, what="the collision markers")
     assert {m.text for m in hits()[0].markers if m.ns == "collision"} == set(report.first_collision.names)
     wait_for(lambda: statuses(diagnostics, messages.ERROR), what="an ERROR verdict")
     wait_checked(diagnostics, len(result.t))
+    # The typed verdict says what the /diagnostics one says.
+    wait_for(lambda: verdicts and verdicts[-1].samples == len(result.t), what="the typed verdict")
+    typed = contract.verdict_values(verdicts[-1])
+    assert typed["level"] == MonitorVerdict.ERROR
+    assert typed["first_collision_pair"] == list(report.first_collision.names)
+    assert typed["d"] == pytest.approx(report.d) and typed["expected"] is None
+    assert len(typed["measured"]) == len(model.hinges) and typed["solved"] == []
 
 
 BAD = {
@@ -101,7 +110,7 @@ BAD = {
 
 
 def test_malformed_joint_states_warn_and_the_verdict_stays_right(graph, deployment):
-    client, publisher, events, diagnostics, markers = graph
+    client, publisher, events, diagnostics, markers, _ = graph
     model, result, report = deployment
     names, theta, omega, torque = hinge_states(model, result)
     n = len(result.t)
@@ -123,13 +132,12 @@ def test_malformed_joint_states_warn_and_the_verdict_stays_right(graph, deployme
     feed(publisher, model, result, range(j, n))
     wait_for(lambda: events, what="the collision after the bad messages")
     wait_checked(diagnostics, n)  # done with this deployment: the next test starts clean
-    values = {kv.key: kv.value for kv in events[0].status[0].values}
-    assert values["pair"] == ",".join(report.first_collision.names)
-    assert abs(float(values["t"]) - report.first_collision.t) <= result.t[1] - result.t[0]
+    assert (events[0].body_a, events[0].body_b) == report.first_collision.names
+    assert abs(events[0].t - report.first_collision.t) <= result.t[1] - result.t[0]
 
 
 def test_reset_starts_a_new_deployment(graph, deployment):
-    client, publisher, events, diagnostics, markers = graph
+    client, publisher, events, diagnostics, markers, _ = graph
     model, result, report = deployment
     markers.clear()
     assert client.trigger("/collision_monitor/reset").success
@@ -145,7 +153,7 @@ def test_reset_starts_a_new_deployment(graph, deployment):
 
 def test_an_alias_bomb_on_the_model_topic_is_ignored_at_once(graph, deployment):
     # one such message from anyone on the graph took down collision_monitor and dynamics
-    client, publisher, events, diagnostics, markers = graph
+    client, publisher, events, diagnostics, markers, _ = graph
     model, result, report = deployment
     bomb = client.node.create_publisher(String, "/panel_deploy/model", messages.qos(contract.LATCHED))
     diagnostics.clear()

@@ -1,10 +1,13 @@
-"""The dynamics node as its own process: streamed deployment, parameters, services."""
+"""The dynamics node as its own process: streamed deployment, parameters, the Deploy action."""
 
 import itertools
+import json
 import math
+import time
 
 import numpy as np
 import pytest
+from action_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
@@ -43,15 +46,9 @@ def set_params(client, *params):
     return reply.results
 
 
-def deploy(client, node="/dynamics"):
-    """Call ~/deploy, again while the model has not reached the node yet."""
-    replies = []
-
-    def attempt():
-        replies.append(client.trigger(f"{node}/deploy"))
-        return replies[-1].success or "no model" not in replies[-1].message
-    wait_for(attempt, timeout=60, what="the model to reach the dynamics node")
-    return replies[-1]
+def deploy(client, node="/dynamics", **goal):
+    """A Deploy goal to ``node``, started (sent again while the model has not reached it)."""
+    return client.start_goal(contract.DEPLOY, node, **goal)
 
 
 def deploy_and_collect(client):
@@ -62,16 +59,17 @@ def deploy_and_collect(client):
     wait_for(lambda: client.node.count_publishers("/joint_states") >= 1, what="the dynamics node")
     for box in (states, diagnostics, clocks, panels):
         box.clear()
-    reply = deploy(client)
-    assert reply.success, reply.message
+    goal = deploy(client, wait_for_subscribers=1)
+    result = goal.result()
+    assert result.success and goal.status == GoalStatus.STATUS_SUCCEEDED, result.message
     wait_for(lambda: any(s.name == "/dynamics" for d in diagnostics for s in d.status),
              timeout=60, what="the outcome on /diagnostics")
-    return states, diagnostics, clocks, panels
+    return states, diagnostics, clocks, panels, goal
 
 
 def test_deploy_streams_the_core_trajectory(graph):
     client, *_ = graph
-    states, diagnostics, clocks, panels = deploy_and_collect(client)
+    states, diagnostics, clocks, panels, goal = deploy_and_collect(client)
     wait_for(lambda: len(states) >= round(T_END * RATE) + 1, what="every sample")
     scene, model = configure(load_scene(resolve_scene("paper_4x4")),
                              DynamicsParameters(t_end=T_END, rate_hz=RATE))
@@ -97,19 +95,43 @@ def test_deploy_streams_the_core_trajectory(graph):
     status = [s for d in diagnostics for s in d.status if s.name == "/dynamics"][-1]
     values = {kv.key: kv.value for kv in status.values}
     assert values["success"] == "True" and float(values["energy_balance_error"]) < 0.05
+    result = goal.result()
+    assert result.samples == len(states) and result.t_end == pytest.approx(T_END)
+    assert json.loads(result.summary)["energy_balance_error"] == float(values["energy_balance_error"])
+    assert goal.feedback and goal.feedback[-1].samples <= len(states)
+    assert goal.feedback[0].subscribers >= 1  # this client's joint_states subscription
 
 
-def test_second_deploy_is_refused_and_stop_ends_it(graph):
+def test_deploy_waits_for_the_subscribers_it_is_asked_for(graph):
+    """Nobody else listens: asked for 5 subscribers, the goal ends without a sample."""
+    client, *_ = graph
+    states = client.listen(JointState, "/joint_states", messages.qos(contract.STREAM))
+    wait_for(lambda: client.node.count_publishers("/joint_states") >= 1, what="the dynamics node")
+    states.clear()
+    goal = client.send_goal(contract.DEPLOY, "/dynamics", wait_for_subscribers=5)
+    time.sleep(1.0)
+    assert not goal.done() and not goal.feedback  # waiting (the model came: tests above ran)
+    goal.cancel()
+    result = goal.result(timeout=10)
+    assert goal.status == GoalStatus.STATUS_CANCELED and not result.success
+    assert "subscribers" in result.message and states == []
+
+
+def test_second_goal_is_aborted_and_cancel_stops_the_first(graph):
     client, *_ = graph
     assert all(r.successful for r in set_params(client, Parameter("real_time_factor", value=1.0),
                                                 Parameter("t_end", value=2.0)))
     try:
-        assert deploy(client).success
-        second = client.trigger("/dynamics/deploy")
-        assert not second.success and "running" in second.message
-        assert client.trigger("/dynamics/stop").success
-        wait_for(lambda: not client.trigger("/dynamics/stop").success, timeout=5,
-                 what="the run to stop")
+        first = deploy(client)
+        assert not first.done()
+        second = client.send_goal(contract.DEPLOY, "/dynamics")
+        assert "running" in second.result(timeout=10).message
+        assert second.status == GoalStatus.STATUS_ABORTED
+        first.cancel()
+        result = first.result(timeout=10)
+        assert first.status == GoalStatus.STATUS_CANCELED
+        assert result.status == 1 and result.message.startswith("stopped at t = ")
+        assert 0 < result.samples < 401 and json.loads(result.summary)["t_end"] < 2.0
     finally:
         set_params(client, Parameter("real_time_factor", value=0.0), Parameter("t_end", value=T_END))
 
@@ -221,15 +243,17 @@ def test_a_failing_deployment_is_an_error_status_and_the_node_deploys_again(monk
     outcomes = lambda: [s for d in list(diagnostics) for s in d.status  # noqa: E731
                         if s.name == "/guarded/dynamics"]
     try:
-        reply = deploy(client, "/guarded/dynamics")
-        assert reply.success, reply.message
+        goal = deploy(client, "/guarded/dynamics")
+        result = goal.result()
+        assert goal.status == GoalStatus.STATUS_ABORTED and not result.success
+        assert result.message == "~/deploy failed: RuntimeError: the integrator blew up"
         wait_for(outcomes, what="the failure on /diagnostics")
         failed, = outcomes()
         assert failed.level == messages.ERROR
-        assert failed.message == "the deployment failed: RuntimeError: the integrator blew up"
+        assert failed.message == result.message
         monkeypatch.undo()
         wait_for(lambda: not node.running, what="the failed worker to end")
-        assert client.trigger("/guarded/dynamics/deploy").success
+        assert client.send_goal(contract.DEPLOY, "/guarded/dynamics").result().success
         wait_for(lambda: len(outcomes()) == 2, what="the second outcome")
         values = messages.values(outcomes()[-1])
         assert values["success"] is True and values["samples"] == 21
@@ -250,8 +274,8 @@ def test_sigint_mid_deployment_stops_it_and_ends_cleanly(compiled_nodes):
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")
     states = client.listen(JointState, "/interrupted/joint_states", messages.qos(contract.STREAM))
     try:
-        reply = deploy(client, "/interrupted/dynamics")
-        assert reply.success, reply.message
+        goal = deploy(client, "/interrupted/dynamics")
+        assert not goal.done()
         wait_for(lambda: len(states) > 20, what="the deployment under way")
         code, seconds, err = dynamics.stop()
         assert code == 0 and seconds < 3.0 and "Traceback" not in err, (code, seconds, err)

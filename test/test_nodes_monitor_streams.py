@@ -8,6 +8,7 @@ import time
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+from panel_deploy_interfaces.msg import CollisionEvent
 from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from ros_harness import Client, NodeProcess, wait_for
@@ -42,7 +43,7 @@ def graph(compiled_nodes):
     client = Client("monitor_streams_test")
     publisher = client.node.create_publisher(JointState, "/joint_states", messages.qos(contract.STREAM))
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")
-    events = client.listen(DiagnosticArray, "/panel_deploy/collision_events")
+    events = client.listen(CollisionEvent, "/panel_deploy/collision_events")
     wait_for(lambda: publisher.get_subscription_count() >= 1, what="the monitor")
     wait_for(lambda: any(s.message in ("waiting for joint states", "no collision")
                          for s in statuses(diagnostics)), what="the model")

@@ -3,9 +3,11 @@ processes): every node hears only its own array, and each verdict is its own."""
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+from panel_deploy_interfaces.msg import CollisionEvent
 from rcl_interfaces.srv import GetParameters
 from ros_harness import Client, NodeProcess, wait_for
 
+from panel_deploy import contract
 from panel_deploy.nodes import messages
 
 T_END = 0.6
@@ -26,7 +28,7 @@ def arrays(compiled_nodes):
                   NodeProcess("collision_monitor", namespace=ns)]
     client = Client("namespaces_test")
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")
-    events = {ns: client.listen(DiagnosticArray, f"{ns}/panel_deploy/collision_events")
+    events = {ns: client.listen(CollisionEvent, f"{ns}/panel_deploy/collision_events")
               for ns in ARRAYS}
     yield client, diagnostics, events
     client.close()
@@ -39,14 +41,6 @@ def statuses(diagnostics, name):
     return [s for d in list(diagnostics) for s in d.status if s.name == name]
 
 
-def deploy(client, ns):
-    replies = []
-
-    def attempt():  # again while the model has not reached the node
-        replies.append(client.trigger(f"{ns}/dynamics/deploy"))
-        return replies[-1].success or "no model" not in replies[-1].message
-    wait_for(attempt, timeout=60, what=f"{ns}/dynamics to take a request")
-    return replies[-1]
 
 
 def test_each_array_has_its_own_topics_and_verdict(arrays):
@@ -62,9 +56,9 @@ def test_each_array_has_its_own_topics_and_verdict(arrays):
     for topic in ("joint_states", "robot_description", "panel_deploy/model",
                   "panel_deploy/collision_events", "panel_deploy/collision_markers"):
         assert {f"{ns}/{topic}" for ns in ARRAYS} <= topics and f"/{topic}" not in topics, topic
-    for ns in ARRAYS:
-        reply = deploy(client, ns)
-        assert reply.success, reply.message
+    goals = {ns: client.start_goal(contract.DEPLOY, f"{ns}/dynamics") for ns in ARRAYS}
+    for ns, goal in goals.items():
+        assert goal.result().success, goal.result().message
     outcome = {}
     for ns in ARRAYS:
         wait_for(lambda: statuses(diagnostics, f"{ns}/dynamics"), timeout=120,
@@ -84,7 +78,8 @@ def test_each_array_has_its_own_topics_and_verdict(arrays):
     assert 0.41 <= float(messages.values(first)["first_collision_t"]) <= 0.42
     assert second.level == messages.OK and second.message == "no collision", second.message
     assert events["/array1"] and not events["/array2"]
-    assert {s.name for d in events["/array1"] for s in d.status} == {"/array1/collision_monitor/event"}
+    assert {e.header.frame_id for e in events["/array1"]} == {"world"}
+    assert events["/array1"][0].body_a == "r1c2+r1c3"
     # A stream of the other array would have been refused (stamps going back, a WARN each).
     for ns in ARRAYS:
         assert not [s for s in statuses(diagnostics, f"{ns}/collision_monitor")

@@ -2,7 +2,8 @@
 
 import pytest
 import yaml
-from diagnostic_msgs.msg import DiagnosticArray
+from action_msgs.msg import GoalStatus
+from panel_deploy_interfaces.msg import OptimiserProgress
 from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
@@ -21,7 +22,7 @@ def graph(compiled_nodes):
              NodeProcess("optimiser", "max_evaluations:=12", "method:=local",
                          f"damping_ratio_bounds:=[{LUBRICANT[0]},{LUBRICANT[1]}]")]
     client = Client("optimiser_test")
-    progress = client.listen(DiagnosticArray, "/optimiser/progress")
+    progress = client.listen(OptimiserProgress, "/optimiser/progress")
     results = client.listen(String, "/optimiser/result", messages.qos(contract.LATCHED))
     yield client, progress, results
     client.close()
@@ -31,14 +32,8 @@ def graph(compiled_nodes):
 
 
 def optimise(client):
-    replies = []
-
-    def attempt():  # until the model is there and the last search has set its target
-        replies.append(client.trigger("/optimiser/optimise"))
-        return replies[-1].success or not any(
-            why in replies[-1].message for why in ("no model", "running"))
-    wait_for(attempt, timeout=60, what="the optimiser to take a request")
-    return replies[-1]
+    """An Optimise goal, started (sent again while the model has not come)."""
+    return client.start_goal(contract.OPTIMISE, "/optimiser")
 
 
 def stiffness(client):
@@ -53,15 +48,19 @@ def stiffness(client):
 def test_optimise_reports_progress_and_sets_the_target(graph):
     client, progress, results = graph
     before = stiffness(client)
-    reply = optimise(client)
-    assert reply.success, reply.message
-    second = client.trigger("/optimiser/optimise")
-    assert not second.success and "running" in second.message, second.message
-    wait_for(lambda: results, timeout=120, what="a result")
+    goal = optimise(client)
+    second = client.send_goal(contract.OPTIMISE, "/optimiser")
+    assert "running" in second.result(timeout=10).message
+    assert second.status == GoalStatus.STATUS_ABORTED
+    answer = goal.result(timeout=120)
+    assert answer.success and goal.status == GoalStatus.STATUS_SUCCEEDED, answer.message
+    wait_for(lambda: results, timeout=10, what="the result topic")
     result = yaml.safe_load(results[-1].data)
-    assert progress and {kv.key for kv in progress[0].status[0].values} >= {
-        "evaluations", "best_f", "feasible", "elapsed"}
-    assert result["success"], result["message"]
+    assert result == yaml.safe_load(answer.result) and result["success"], result["message"]
+    assert progress and progress[-1].evaluations >= progress[0].evaluations >= 1
+    assert goal.feedback[-1].progress.evaluations == progress[-1].evaluations
+    assert answer.damping_ratio == pytest.approx(result["hinges"][next(iter(result["hinges"]))]["c"]
+                                                 / result["hinges"][next(iter(result["hinges"]))]["k"])
     k = [result["hinges"][name]["k"] for name in result["hinges"]]
     wait_for(lambda: stiffness(client) != before, what="the dynamics node's stiffness to change")
     after, ratio = stiffness(client)
@@ -78,11 +77,12 @@ def test_cancel_stops_with_the_best_so_far(graph):
     assert all(r.successful for r in set_reply.results)
     results.clear()
     progress.clear()
-    assert optimise(client).success
+    goal = optimise(client)
     wait_for(lambda: progress, timeout=60, what="progress")
-    assert client.trigger("/optimiser/cancel").success
-    wait_for(lambda: results, timeout=60, what="the result after cancel")
-    result = yaml.safe_load(results[-1].data)
+    goal.cancel()
+    answer = goal.result(timeout=60)
+    assert goal.status == GoalStatus.STATUS_CANCELED
+    result = yaml.safe_load(answer.result)
     assert result["status"] == 3 and result["nfev"] < 400
 
 

@@ -10,10 +10,10 @@ import pytest
 from hostile import file_size_limit
 from rclpy.serialization import deserialize_message
 from rosbags.rosbag2 import Reader
-from rosbags.typesys import Stores, get_typestore
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import JointState
 
+from readers import typestore_of
 from panel_deploy.collision import CollisionSettings, check_trajectory
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_states
@@ -38,9 +38,9 @@ def recording(tmp_path_factory, compiled_nodes):
 
 
 def read(path):
-    store = get_typestore(Stores.ROS2_JAZZY)
     out = {}
     with Reader(path) as reader:
+        store = typestore_of(reader)
         for connection, timestamp, raw in reader.messages():
             out.setdefault(connection.topic, []).append(
                 (timestamp, raw, store.deserialize_cdr(raw, connection.msgtype)))

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 tf2_msgs = pytest.importorskip(
-    "tf2_msgs.msg", reason="tf2_msgs has no wheel: pip install ./vendor/tf2_msgs (README)")
+    "tf2_msgs.msg", reason="tf2_msgs has no wheel: pip install ./vendor/interfaces (README)")
 
 from rcl_interfaces.srv import SetParameters  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
@@ -57,13 +57,7 @@ def _deploy_both(client):
     client.node.create_subscription(TFMessage, "/tf", raw.append, messages.qos(contract.EVENTS), raw=True)
     wait_for(lambda: client.node.count_publishers("/tf") >= len(ARRAYS), what="the /tf publishers")
     for ns in ARRAYS:
-        replies = []
-
-        def attempt():
-            replies.append(client.trigger(f"{ns}/dynamics/deploy"))
-            return replies[-1].success or "no model" not in replies[-1].message
-        wait_for(attempt, timeout=60, what=f"the model to reach {ns}/dynamics")
-        assert replies[-1].success, replies[-1].message
+        client.start_goal(contract.DEPLOY, f"{ns}/dynamics")
 
     def prefixed(box, prefix):
         return [m for m in list(box) if m.transforms[0].header.frame_id.startswith(prefix)]

@@ -42,11 +42,11 @@ def test_uniform_bag_collides_where_the_current_code_says():
     model, result, report = _current()
     first = report.first_collision
     recording = open_recording(BAGS / "paper_4x4_uniform.mcap")
-    (t, events), = recording.messages("/panel_deploy/collision_events", m.DIAGNOSTIC_ARRAY)
-    values = {kv.key: kv.value for kv in events.status[0].values}
-    assert values["pair"] == ",".join(first.names), "regenerate: python bench/make_bags.py"
-    assert abs(float(values["t"]) - first.t) <= SAMPLE, "regenerate: python bench/make_bags.py"
-    assert math.isclose(float(values["approach_speed"]), report.v, rel_tol=0.05)
+    events = recording.messages("/panel_deploy/collision_events", m.COLLISION_EVENT)
+    event = events[0][1]
+    assert (event.body_a, event.body_b) == first.names, "regenerate: python bench/make_bags.py"
+    assert abs(event.t - first.t) <= SAMPLE, "regenerate: python bench/make_bags.py"
+    assert math.isclose(event.approach_speed, report.v, rel_tol=0.05)
 
 
 def test_feasible_bag_deploys_flat_without_collision_as_the_current_code_says():

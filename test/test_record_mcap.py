@@ -34,7 +34,7 @@ from panel_deploy.scene import load_scene, resolve_scene
 
 PER_SAMPLE = ("/clock", "/joint_states", "/panel_deploy/panels", "/tf")
 #: Latched topics, as ROS users expect them (a late subscriber gets the last message).
-LATCHED = ("/robot_description", "/panel_deploy/model", "/tf_static", "/dynamics/scene",
+LATCHED = ("/robot_description", "/panel_deploy/model", "/tf_static", "/dynamics/scene", "/collision_monitor/verdict",
            "/optimiser/result")
 #: What simulate --record has no source for: no optimiser runs.
 NOT_SIMULATED = ("/optimiser/progress", "/optimiser/result")
@@ -63,7 +63,10 @@ def test_the_recorded_run_is_the_plain_run(recorded):
 def test_mcap_reader_summary_counts_and_chunks(recorded):
     from mcap.reader import make_reader
 
-    path, _, scene, model, result, _ = recorded
+    path, _, scene, model, result, report = recorded
+    expected = {topic: (len(result.t) if topic in PER_SAMPLE else 0 if topic in NOT_SIMULATED
+                        else len(report.events) if topic == "/panel_deploy/collision_events" else 1)
+                for topic in m.TOPICS}
     with open(path, "rb") as f:
         reader = make_reader(f, validate_crcs=True)
         header, summary = reader.get_header(), reader.get_summary()
@@ -71,7 +74,6 @@ def test_mcap_reader_summary_counts_and_chunks(recorded):
         topics = {c.topic: c for c in summary.channels.values()}
         assert sorted(topics) == sorted(m.TOPICS)
         counts = summary.statistics.channel_message_counts
-        s = len(result.t)
         for topic, channel in topics.items():
             schema = summary.schemas[channel.schema_id]
             assert (schema.name, schema.encoding, channel.message_encoding) == \
@@ -81,9 +83,8 @@ def test_mcap_reader_summary_counts_and_chunks(recorded):
             assert qos["durability"] == ("transient_local" if topic in LATCHED else "volatile")
             assert qos["depth"] == (5000 if topic in ("/joint_states", "/clock") else
                                     1 if topic in LATCHED else 100)
-            assert counts.get(channel.id, 0) == (s if topic in PER_SAMPLE else
-                                                 0 if topic in NOT_SIMULATED else 1)
-        assert summary.statistics.message_count == 4 * s + 7
+            assert counts.get(channel.id, 0) == expected[topic], topic
+        assert summary.statistics.message_count == sum(expected.values())
         assert summary.statistics.message_end_time == round(result.t[-1] * 1e9)
         chunks = summary.chunk_indexes
         assert len(chunks) >= 8 and all(c.compression == "zstd" for c in chunks)
@@ -104,8 +105,7 @@ def test_mcap_reader_summary_counts_and_chunks(recorded):
     bag = yaml.safe_load(meta["rosbag2"]["serialized_metadata"])
     assert bag["version"] == 9 and bag["storage_identifier"] == "mcap"
     assert {t["topic_metadata"]["name"]: t["message_count"] for t in bag["topics_with_message_count"]} \
-        == {topic: (len(result.t) if topic in PER_SAMPLE else 0 if topic in NOT_SIMULATED else 1)
-            for topic in m.TOPICS}
+        == expected
 
 
 def _rosbags_messages(path):
@@ -155,14 +155,17 @@ def test_rosbags_decodes_every_message_and_it_is_what_was_computed(recorded):
     assert np.allclose([h.c for h in rebuilt.hinges], [h.c for h in model.hinges], rtol=1e-12)
     static = got["/tf_static"][0][1].transforms[0]
     assert (static.header.frame_id, static.child_frame_id) == ("world", model.bodies[model.ground].name)
-    (t_event, events), = got["/panel_deploy/collision_events"]
+    events = got["/panel_deploy/collision_events"]
     first = report.first_collision
-    assert t_event == stamps[first.sample]
-    status = events.status[0]
-    values = {kv.key: kv.value for kv in status.values}
-    assert status.level == m.ERROR and values["pair"] == ",".join(first.names)
-    assert float(values["t"]) == first.t and float(values["approach_speed"]) == first.approach_speed
-    assert len(events.status) == len(report.events)
+    assert [t for t, _ in events] == [stamps[first.sample]] * len(report.events)
+    event = events[0][1]
+    assert [event.body_a, event.body_b] == list(first.names) and event.sample == first.sample
+    assert event.t == first.t and event.approach_speed == first.approach_speed
+    assert event.header.frame_id == "world" and np.array_equal(
+        [event.point.x, event.point.y, event.point.z], first.point)
+    (t_verdict, verdict), = got["/collision_monitor/verdict"]
+    assert t_verdict == stamps[-1] and verdict.level == m.ERROR
+    assert list(verdict.first_collision_pair) == list(first.names) and verdict.d == report.d
     (t_end, diagnostics), = got["/diagnostics"]
     assert t_end == stamps[-1]
     outcome = {st.name: st for st in diagnostics.status}
@@ -181,8 +184,11 @@ def test_rclpy_deserializes_every_message_to_the_same_content(recorded):
     from std_msgs.msg import String
     from visualization_msgs.msg import MarkerArray
 
+    from panel_deploy_interfaces.msg import CollisionEvent, MonitorVerdict
+
     types = {m.STRING: String, m.JOINT_STATE: JointState, m.MARKER_ARRAY: MarkerArray,
-             m.DIAGNOSTIC_ARRAY: DiagnosticArray, m.CLOCK: Clock}
+             m.DIAGNOSTIC_ARRAY: DiagnosticArray, m.CLOCK: Clock,
+             m.COLLISION_EVENT: CollisionEvent, m.MONITOR_VERDICT: MonitorVerdict}
     path = recorded[0]
     decoded = 0
     with open(path, "rb") as f:
@@ -193,7 +199,8 @@ def test_rclpy_deserializes_every_message_to_the_same_content(recorded):
             theirs = deserialize_message(message.data, types[schema.name])
             _same(ours, theirs)
             decoded += 1
-    assert decoded == 3 * len(recorded[4].t) + 6  # 3 strings, markers of the collision, 2 diagnostics
+    # 3 strings, markers of the collision, /diagnostics, the verdict and the events
+    assert decoded == 3 * len(recorded[4].t) + 6 + len(recorded[5].events)
 
 
 def _same(ours, theirs):
@@ -209,7 +216,8 @@ def _same(ours, theirs):
         elif isinstance(b, bytes):  # byte fields: rclpy bytes, rosbags int
             assert (a if isinstance(a, (bytes, bytearray)) else bytes([a])) == b
         else:
-            assert np.array_equal(np.asarray(a), np.asarray(b)), name
+            a, b = np.asarray(a), np.asarray(b)
+            assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), name
 
 
 def _rerun():

@@ -7,14 +7,16 @@ parser Foxglove's web decoder mirrors).
 """
 
 import json
+import math
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from panel_deploy import frames
+from panel_deploy import contract, frames
 from panel_deploy.frames import quaternions
 from panel_deploy.build import build_model
 from panel_deploy.model import hinge_order
@@ -173,7 +175,12 @@ def test_schema_text_decodes_our_bytes(model, names, typename):
     built = {m.STRING: m.string("<robot/>"), m.JOINT_STATE: m.joint_state(names, s.t, s.theta, s.omega, s.torque),
              m.MARKER_ARRAY: panel_markers(model, s.rotation, s.position, s.t),
              m.DIAGNOSTIC_ARRAY: m.diagnostics(s.t, m.status("x", m.WARN, "text", {"a": 1.5, "b": None})),
-             m.CLOCK: clock(s.t), m.TF_MESSAGE: tf_message(model, s.rotation, s.position, s.t)}
+             m.CLOCK: clock(s.t), m.TF_MESSAGE: tf_message(model, s.rotation, s.position, s.t),
+             m.COLLISION_EVENT: m.collision_event(EVENT, origin=2.0),
+             m.MONITOR_VERDICT: m.verdict(2, "collision", VERDICT, 2.416),
+             contract.OPTIMISER_PROGRESS_MSG: m.TYPESTORE.types[contract.OPTIMISER_PROGRESS_MSG](
+                 header=m._header(3.0), phase="local 1", evaluations=7, best_f=-0.5,
+                 feasible=True, elapsed=3.0)}
     schema = Schema(id=1, name=typename, encoding="ros2msg", data=m.msgdef(typename).encode())
     decoded = DecoderFactory().decoder_for("cdr", schema)(m.serialize(built[typename]))
     if typename == m.JOINT_STATE:
@@ -182,6 +189,22 @@ def test_schema_text_decodes_our_bytes(model, names, typename):
         assert len(decoded.transforms) == model.n_coords
     elif typename == m.MARKER_ARRAY:
         assert [x.text for x in decoded.markers] == [b.name for b in model.bodies]
+    elif typename == m.COLLISION_EVENT:
+        assert (decoded.body_a, decoded.body_b, decoded.t) == ("a", "b", 0.416)
+        assert decoded.header.stamp.sec == 2 and decoded.point.y == 0.16
+        assert math.isnan(decoded.contact_time) and decoded.sample == 84
+    elif typename == m.MONITOR_VERDICT:
+        assert decoded.level == 2 and list(decoded.first_collision_pair) == ["a", "b"]
+        assert decoded.expected == -1 and math.isnan(decoded.d) and decoded.samples == 84
+
+
+#: A collision event and a verdict as the core makes them (fields of
+#: panel_deploy.collision's CollisionEvent and of StreamCheck.verdict()).
+EVENT = SimpleNamespace(names=("a", "b"), t=0.416, approach_speed=4.2, normal_speed=4.0,
+                        distance=-1e-4, contact_time=None, sample=84, point=(0.0, 0.16, 0.0025))
+VERDICT = {"deployment": 1, "origin": 2.0, "t": 0.416, "samples": 84, "d": None,
+           "measured": ["r1c1-r1c2"], "solved": [], "first_collision_pair": ["a", "b"],
+           "first_collision_t": 0.416, "approach_speed": 4.2}
 
 
 def test_rclpy_deserializes_what_we_encode(model, names):
@@ -207,6 +230,14 @@ def test_rclpy_deserializes_what_we_encode(model, names):
     diag = deserialize_message(m.serialize(m.diagnostics(1.5, m.status("n", m.ERROR, "msg", {"k": 2.0}))),
                                DiagnosticArray)
     assert diag.status[0].level == b"\x02" and diag.status[0].values[0].value == "2.0"
+    from panel_deploy_interfaces.msg import CollisionEvent, MonitorVerdict
+
+    event = deserialize_message(m.serialize(m.collision_event(EVENT, origin=2.0)), CollisionEvent)
+    assert (event.body_a, event.body_b, event.sample, event.point.z) == ("a", "b", 84, 0.0025)
+    assert event.header.stamp.sec == 2 and event.header.stamp.nanosec == 416_000_000
+    verdict = deserialize_message(m.serialize(m.verdict(2, "c", VERDICT, 2.416)), MonitorVerdict)
+    assert verdict.level == MonitorVerdict.ERROR and list(verdict.measured) == ["r1c1-r1c2"]
+    assert contract.verdict_values(verdict)["first_collision_t"] == 0.416
 
 
 def test_rclpy_bytes_with_stray_padding_decode_and_trim():

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import yaml
 from rosbags.rosbag2 import Reader
-from rosbags.typesys import Stores, get_typestore
 
+from readers import typestore_of
 from panel_deploy.cli import main
 
 CLI = str(Path(sys.executable).parent / "panel-deploy")
@@ -25,9 +25,9 @@ SAME = 1e-9
 
 def recorded(path, namespace=""):
     """``{topic: [message]}`` of a recording, and its joint states as (names, t, position)."""
-    store = get_typestore(Stores.ROS2_JAZZY)
     out = {}
     with Reader(path) as reader:
+        store = typestore_of(reader)
         for connection, _, raw in reader.messages():
             out.setdefault(connection.topic, []).append(
                 store.deserialize_cdr(raw, connection.msgtype))

@@ -1,9 +1,13 @@
 """The ROS contract of panel_deploy, in one place and without rclpy.
 
-Every topic and service the node suite offers, with its type, QoS, publisher
-and stamp convention; the status names on ``/diagnostics``; the fields of a
-collision event, a monitor verdict and a deployment outcome, with the parsers
-that turn their key-value text back into numbers. The nodes create their
+Every topic, service and action the node suite offers, with its type, QoS,
+publisher and stamp convention; the status names on ``/diagnostics``; the
+fields of a collision event, a monitor verdict and a deployment outcome, with
+the parsers that turn their key-value text on ``/diagnostics`` back into
+numbers. Our own message and action definitions are in ``interfaces/`` (the
+ROS interface package ``panel_deploy_interfaces``, which
+``vendor/interfaces`` builds at install; :func:`definitions` gives their text
+to readers without ROS). The nodes create their
 publishers, subscriptions and services from these values, the recorder
 records every topic listed here with the QoS given here, and the readers,
 replay and the tests read them from here (``test_contract`` fails when a
@@ -32,6 +36,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 #: The ground frame's name (URDF root link, /tf_static parent, marker frame).
 WORLD = "world"
@@ -43,6 +48,21 @@ DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
 CLOCK = "rosgraph_msgs/msg/Clock"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 TRIGGER = "std_srvs/srv/Trigger"
+#: Our interface package (panel_deploy/contract/interfaces).
+INTERFACES = "panel_deploy_interfaces"
+COLLISION_EVENT = f"{INTERFACES}/msg/CollisionEvent"
+MONITOR_VERDICT = f"{INTERFACES}/msg/MonitorVerdict"
+OPTIMISER_PROGRESS_MSG = f"{INTERFACES}/msg/OptimiserProgress"
+DEPLOY_ACTION = f"{INTERFACES}/action/Deploy"
+OPTIMISE_ACTION = f"{INTERFACES}/action/Optimise"
+#: The folder of the interface package: package.xml, CMakeLists.txt, msg/, action/.
+INTERFACES_DIR = Path(__file__).resolve().parent / "interfaces"
+
+
+def definitions() -> dict:
+    """``{type name: .msg text}`` of every message of our interface package."""
+    return {f"{INTERFACES}/msg/{path.stem}": path.read_text()
+            for path in sorted((INTERFACES_DIR / "msg").glob("*.msg"))}
 
 
 @dataclass(frozen=True)
@@ -100,24 +120,27 @@ PANELS = Topic("panel_deploy/panels", MARKER_ARRAY, EVENTS, "dynamics", stamped=
 CLOCK_TOPIC = Topic("/clock", CLOCK, STREAM, "dynamics", stamped=True)
 TF = Topic("/tf", TF_MESSAGE, EVENTS, "dynamics", stamped=True)
 TF_STATIC = Topic("/tf_static", TF_MESSAGE, LATCHED, "dynamics")
-DIAGNOSTICS = Topic("/diagnostics", DIAGNOSTIC_ARRAY, EVENTS, "dynamics, collision_monitor",
+DIAGNOSTICS = Topic("/diagnostics", DIAGNOSTIC_ARRAY, EVENTS, "dynamics, collision_monitor, optimiser",
                     stamped=True)
-COLLISION_EVENTS = Topic("panel_deploy/collision_events", DIAGNOSTIC_ARRAY, EVENTS,
+COLLISION_EVENTS = Topic("panel_deploy/collision_events", COLLISION_EVENT, EVENTS,
                          "collision_monitor", stamped=True)
+#: The monitor's verdict with its coverage; latched, so a late subscriber has the last.
+VERDICT = Topic("collision_monitor/verdict", MONITOR_VERDICT, LATCHED, "collision_monitor",
+                stamped=True)
 COLLISION_MARKERS = Topic("panel_deploy/collision_markers", MARKER_ARRAY, EVENTS,
                           "collision_monitor", stamped=True)
-OPTIMISER_PROGRESS = Topic("optimiser/progress", DIAGNOSTIC_ARRAY, EVENTS, "optimiser")
+OPTIMISER_PROGRESS = Topic("optimiser/progress", OPTIMISER_PROGRESS_MSG, EVENTS, "optimiser")
 OPTIMISER_RESULT = Topic("optimiser/result", STRING, LATCHED, "optimiser")
 
 #: Every topic, in the order a recording lists its channels.
 TOPICS = (ROBOT_DESCRIPTION, MODEL, DEPLOYED_SCENE, JOINT_STATES, PANELS, DIAGNOSTICS,
-          COLLISION_EVENTS, COLLISION_MARKERS, OPTIMISER_PROGRESS, OPTIMISER_RESULT, CLOCK_TOPIC,
+          COLLISION_EVENTS, VERDICT, COLLISION_MARKERS, OPTIMISER_PROGRESS, OPTIMISER_RESULT, CLOCK_TOPIC,
           TF, TF_STATIC)
 
 
 @dataclass(frozen=True)
 class Service:
-    """A ``std_srvs/Trigger`` service: ``node``/``name``, relative to the graph's namespace."""
+    """A service or an action of ``type``: ``node``/``name``, relative to the graph's namespace."""
 
     node: str
     name: str
@@ -130,12 +153,15 @@ class Service:
 
 
 RELOAD = Service("array_model", "reload")
-DEPLOY = Service("dynamics", "deploy")
-STOP = Service("dynamics", "stop")
 RESET = Service("collision_monitor", "reset")
-OPTIMISE = Service("optimiser", "optimise")
-CANCEL = Service("optimiser", "cancel")
-SERVICES = (RELOAD, DEPLOY, STOP, RESET, OPTIMISE, CANCEL)
+SERVICES = (RELOAD, RESET)
+
+#: Long-running goals with feedback and cancel (``node``/``name``, relative).
+DEPLOY = Service("dynamics", "deploy", DEPLOY_ACTION)
+OPTIMISE = Service("optimiser", "optimise", OPTIMISE_ACTION)
+ACTIONS = (DEPLOY, OPTIMISE)
+#: s the dynamics node waits for a Deploy goal's ``wait_for_subscribers`` at most.
+SUBSCRIBER_WAIT = 30.0
 
 #: Node names of the suite.
 NODES = ("array_model", "dynamics", "collision_monitor", "optimiser")
@@ -181,8 +207,6 @@ def status_name(namespace: str, node: str) -> str:
     return resolve(node, namespace)
 
 
-#: A collision event's status is the monitor's name + this.
-EVENT_SUFFIX = "/event"
 OK, WARN, ERROR = 0, 1, 2
 PANEL_COLOUR = (0.25, 0.45, 0.85, 1.0)
 HIT_COLOUR = (0.95, 0.15, 0.1, 1.0)
@@ -200,18 +224,64 @@ def status_value(v) -> str:
     return str(v)
 
 
-def event_fields(event, origin: float = 0.0) -> tuple:
-    """Message and key-values of one collision event's status: pair, time ``t``
-    (s since the first sample the monitor checked) and ``stamp`` (s, the stream's
-    own clock: ``origin``, the stamp of that first sample, plus ``t``), approach
-    speed of Eq. (7) (m/s), distance (m); recordings carry the same."""
+def _nan(v) -> float:
+    """A message's float field: None (no value) as NaN."""
+    return math.nan if v is None else float(v)
+
+
+def event_message(event) -> dict:
+    """The fields of the ``CollisionEvent`` message of a collision ``event``
+    (:class:`panel_deploy.collision.CollisionEvent`) but its header, whose stamp
+    is the event's time in the stream's clock (the deployment's first stamp + t):
+    the pair, t (s since the first sample checked), the approach speed of
+    Eq. (7) (the normal speed where Eq. 7 has none; m/s), the distance (m),
+    contact time (s), sample and contact point (m)."""
     speed = event.approach_speed if math.isfinite(event.approach_speed) else event.normal_speed
-    return (f"collision between {event.names[0]} and {event.names[1]} at t = {event.t:.4f} s",
-            {"pair": list(event.names), "t": event.t, "stamp": origin + event.t,
-             "approach_speed": speed,
-             "normal_speed": event.normal_speed, "distance": event.distance,
-             "contact_time": event.contact_time, "sample": event.sample,
-             "point": [float(x) for x in event.point]})
+    return {"body_a": event.names[0], "body_b": event.names[1], "t": float(event.t),
+            "approach_speed": float(speed), "normal_speed": _nan(event.normal_speed),
+            "distance": float(event.distance), "contact_time": _nan(event.contact_time),
+            "sample": -1 if event.sample is None else int(event.sample),
+            "point": [float(x) for x in event.point]}
+
+
+def event_text(body_a: str, body_b: str, t: float) -> str:
+    """One line saying a collision happened (logs, the event's verdict)."""
+    return f"collision between {body_a} and {body_b} at t = {t:.4f} s"
+
+
+#: MonitorVerdict's float, count and name-list fields (besides level and message).
+_VERDICT_FLOATS = ("origin", "t", "since_last_sample", "largest_gap", "d", "d_time",
+                   "distance_now", "first_collision_t", "approach_speed")
+_VERDICT_COUNTS = ("deployment", "samples", "refused", "skipped", "gaps")
+_VERDICT_NAMES = ("measured", "solved", "d_pair", "first_collision_pair")
+
+
+def verdict_message(level: int, text: str, values: dict) -> dict:
+    """The fields of a ``MonitorVerdict`` message but its header, from a
+    verdict's key-values (those of ``/diagnostics``): NaN, 0, -1 or an empty
+    list where a value is missing (-1: ``expected`` unknown)."""
+    out = {"level": int(level), "message": text}
+    out.update({k: _nan(values.get(k)) for k in _VERDICT_FLOATS})
+    out.update({k: int(values.get(k) or 0) for k in _VERDICT_COUNTS})
+    out.update({k: [str(x) for x in values.get(k) or ()] for k in _VERDICT_NAMES})
+    out["expected"] = -1 if values.get("expected") is None else int(values["expected"])
+    return out
+
+
+def verdict_values(message) -> dict:
+    """A ``MonitorVerdict`` message (rclpy's or rosbags') as the key-values of
+    the same verdict on ``/diagnostics``: None where the message holds NaN,
+    -1 or an empty pair."""
+    out = {"level": int(message.level), "message": message.message}
+    for k in _VERDICT_FLOATS:
+        v = float(getattr(message, k))
+        out[k] = None if math.isnan(v) else v
+    out.update({k: int(getattr(message, k)) for k in _VERDICT_COUNTS})
+    out.update({k: list(getattr(message, k)) for k in _VERDICT_NAMES})
+    for k in ("d_pair", "first_collision_pair"):
+        out[k] = out[k] or None
+    out["expected"] = None if message.expected < 0 else int(message.expected)
+    return out
 
 
 #: Keys of the dynamics node's outcome status (besides ``summary`` and ``samples``).
@@ -250,10 +320,7 @@ def _pair(text: str):
 
 
 #: How each key-value of an event, a verdict or an outcome reads back.
-_PARSERS = {"t": float, "stamp": float, "approach_speed": float, "normal_speed": _number, "distance": float,
-            "contact_time": _number, "sample": _integer, "pair": _pair,
-            "point": lambda s: [float(x) for x in s.split(",")] if s else None,
-            "deployment": _integer, "origin": _number, "samples": _integer, "d": _number,
+_PARSERS = {"t": float, "approach_speed": float, "deployment": _integer, "origin": _number, "samples": _integer, "d": _number,
             "d_pair": _pair, "d_time": _number, "distance_now": _number, "refused": _integer,
             "gaps": _integer, "largest_gap": _number, "solved": lambda s: s.split(",") if s else [],
             "measured": lambda s: s.split(",") if s else [], "expected": _integer,
@@ -267,6 +334,6 @@ _PARSERS = {"t": float, "stamp": float, "approach_speed": float, "normal_speed":
 
 
 def parse_values(values: dict) -> dict:
-    """Key-values of an event, a verdict or an outcome (``{key: text}``) as
+    """Key-values of a verdict or an outcome on ``/diagnostics`` (``{key: text}``) as
     Python values: numbers, lists, None for an empty value; unknown keys stay text."""
     return {k: (_PARSERS[k](v) if k in _PARSERS else v) for k, v in values.items()}

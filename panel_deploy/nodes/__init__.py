@@ -14,6 +14,9 @@ from ..errors import PanelDeployError
 
 INSTALL_HINT = ('rclpy is not installed: python -m pip install "panel_deploy[ros]" '
                 '(or source a ROS 2 Jazzy installation)')
+INTERFACES_HINT = ("panel_deploy_interfaces is not installed: python -m pip install "
+                   "./vendor/interfaces (from the repository; see the README), or build "
+                   "panel_deploy/contract/interfaces with colcon")
 
 
 class MissingROSError(PanelDeployError, ImportError):
@@ -30,6 +33,8 @@ def load(module: str):
                                                "visualization_msgs", "rosgraph_msgs",
                                                "builtin_interfaces"):
             raise MissingROSError(f"{INSTALL_HINT} ({e.name} not found)") from None
+        if e.name and e.name.split(".")[0] == "panel_deploy_interfaces":
+            raise MissingROSError(INTERFACES_HINT) from None
         raise
 
 

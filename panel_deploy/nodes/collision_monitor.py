@@ -5,9 +5,10 @@ Fed by the simulator or by a real array's encoders (core:
 and hinges the stream lacks are handled; ``noise`` makes the check
 noise-aware as :mod:`panel_deploy.collision.monitor` says). Per deployment it
 publishes each collision as it begins (``panel_deploy/collision_events``,
-one status per event, and the pair highlighted on
+one ``CollisionEvent`` per event, and the pair highlighted on
 ``panel_deploy/collision_markers``, cleared when a deployment starts) and its
-verdict on ``/diagnostics`` (OK; WARN when messages were refused or the
+verdict, as a ``MonitorVerdict`` on ``~/verdict`` (latched) and as a status on
+``/diagnostics`` for diagnostics tools (OK; WARN when messages were refused or the
 stream had gaps, or when its coverage is lost: joint states that cannot
 arrive (a publisher of incompatible QoS), joint states all refused (another
 robot's names, a hinge the loop closure cannot complete), a deployment's
@@ -75,6 +76,7 @@ class CollisionMonitorNode(Node):
         self.add_post_set_parameters_callback(self._apply)
         self.diagnostics = runtime.publisher(self, contract.DIAGNOSTICS)
         self.events = runtime.publisher(self, contract.COLLISION_EVENTS)
+        self.verdicts = runtime.publisher(self, contract.VERDICT)
         self.markers = runtime.publisher(self, contract.COLLISION_MARKERS)
         runtime.subscription(self, contract.MODEL, self._on_model)
         runtime.subscription(self, contract.JOINT_STATES, self._on_joint_state,
@@ -155,8 +157,8 @@ class CollisionMonitorNode(Node):
         if found:
             first = found[0] is stream.check.first_events[0]
             R, p = forward_kinematics(self.stream.model, theta)
-            self.events.publish(messages.diagnostics(
-                t, *(messages.event_status(self.status_name, e, stream.origin) for e in found)))
+            for e in found:
+                self.events.publish(messages.collision_event(e, stream.origin, self._frame()))
             self.markers.publish(messages.collision_markers(
                 self.stream.model, found[0], R, p, t, self._frame()))
             if first:  # the verdict turns ERROR now; later events leave it so (timer only)
@@ -200,6 +202,7 @@ class CollisionMonitorNode(Node):
         values.update(expected=self._expected, since_last_sample=(
             None if self._arrived is None else time.monotonic() - self._arrived))
         stamp = values["origin"] + values["t"] if "t" in values else 0.0
+        self.verdicts.publish(messages.verdict(level, text, values, stamp))
         self.diagnostics.publish(messages.diagnostics(
             stamp, messages.status(self.status_name, level, text, values,
                                    hardware_id=self.get_namespace().strip("/") or "panel_array")))

@@ -1,19 +1,22 @@
 """``dynamics`` node: deploys the array from the stowed state and streams it.
 
-``~/deploy`` answers at once and starts a deployment of the model last
-received on ``panel_deploy/model`` with the current parameters; samples go
-out on ``joint_states`` and ``/clock`` as they are computed, ``rate_hz`` per
-simulated second, paced by ``real_time_factor``, stamped with simulated
-time; ``panel_deploy/panels`` follows at a display rate. The outcome ends on
-``/diagnostics`` (its summary, as ``panel-deploy simulate --json`` prints it,
-included), or an ERROR saying why the deployment failed; the node deploys again.
+A goal on the ``~/deploy`` action (``panel_deploy_interfaces/action/Deploy``)
+deploys the model last received on ``panel_deploy/model`` with the current
+parameters, after waiting (at most 30 s) for the goal's number of
+``joint_states`` subscribers; samples go out on ``joint_states`` and
+``/clock`` as they are computed, ``rate_hz`` per simulated second, paced by
+``real_time_factor``, stamped with simulated time; ``panel_deploy/panels``
+follows at a display rate, the feedback ten times a second. The outcome is
+the goal's result (its summary, as ``panel-deploy simulate --json`` prints
+it, included) and a status on ``/diagnostics``; a goal that cannot run (one
+running already, no model, parameters the model refuses) is aborted with the
+reason. Cancelling the goal stops the deployment at the end of the current
+block; the result then holds what was computed.
 
 ``/tf`` carries every sample's link frames (each tree joint's child link in its
 parent's, as robot_state_publisher would send them, which cannot hold the
 loop) and ``/tf_static`` the ground's, so that RViz and Foxglove show the array
 live; frames are ``frame_prefix`` + the URDF's link names (and ``world``).
-tf2_msgs has no wheel on PyPI: without ``pip install ./vendor/tf2_msgs`` the
-node says so once and publishes no /tf.
 """
 
 from __future__ import annotations
@@ -22,11 +25,11 @@ import math
 import time
 from dataclasses import fields
 
+from panel_deploy_interfaces.action import Deploy
 from rclpy.parameter import Parameter
 
 from .. import contract
 from ..contract.cdr import SampleEncoder
-from ..errors import PanelDeployError
 from ..dynamics.deployment import Deployment
 from ..configure import DynamicsParameters, configure
 from ..timing import Pacer
@@ -55,6 +58,8 @@ PARAMETERS = {f.name: (Parameter.Type.DOUBLE_ARRAY if f.name == "stiffness" else
 PARAMETERS[FRAME_PREFIX] = ("", runtime.FRAME_PREFIX_DOC)
 #: /panel_deploy/panels per wall second at most (and always the last sample).
 PANEL_RATE = 30.0
+#: Deploy feedback per wall second at most.
+FEEDBACK_RATE = 10.0
 
 
 class DynamicsNode(runtime.WorkerNode):
@@ -67,15 +72,9 @@ class DynamicsNode(runtime.WorkerNode):
         self.diagnostics = runtime.publisher(self, contract.DIAGNOSTICS)
         self.deployed = runtime.publisher(self, contract.DEPLOYED_SCENE)
         # Absolute, as tf2's own: a namespaced array keeps its frames apart by frame_prefix.
-        if messages.TFMessage is None:
-            self.tf = self.tf_static = None
-            self.get_logger().warning("tf2_msgs is not installed: no /tf or /tf_static "
-                                      "(pip install ./vendor/tf2_msgs, see the README)")
-        else:
-            self.tf = runtime.publisher(self, contract.TF)
-            self.tf_static = runtime.publisher(self, contract.TF_STATIC)
-        runtime.trigger_service(self, contract.DEPLOY, self._deploy)
-        runtime.trigger_service(self, contract.STOP, self._stop)
+        self.tf = runtime.publisher(self, contract.TF)
+        self.tf_static = runtime.publisher(self, contract.TF_STATIC)
+        self.action_server(contract.DEPLOY, self._deploy, self._stop, self.diagnostics)
         self.deployment = None  # the current or last Deployment
 
     def parameters(self, changes=None) -> DynamicsParameters:
@@ -91,50 +90,59 @@ class DynamicsNode(runtime.WorkerNode):
         if self.scene is not None:  # counts and values the scene must accept
             configure(self.scene, params)
 
-    def _deploy(self, request, response):
-        if self.busy(response, "a deployment", contract.STOP):
-            return response
-        try:
-            params = self.parameters()
-            scene, model = configure(self.scene, params)
-        except PanelDeployError as e:
-            response.success, response.message = False, str(e)
-            return response
+    def _deploy(self, goal_handle):
+        params = self.parameters()
+        scene, model = configure(self.scene, params)
         self.deployment = Deployment(model, scene.simulation)
         # What runs, overrides included, before its first sample: recorders and audits need it.
         self.deployed.publish(messages.string(scene_yaml(scene, model)))
         prefix = self.get_parameter(FRAME_PREFIX).value
-        self.start_job("the deployment", self.diagnostics, self._run, self.deployment, scene, params,
-                       prefix)
-        response.success = True
-        # It does not wait for subscribers: say how many will see it from the first sample.
-        response.message = (f"deploying {scene.name or scene.source} to {scene.simulation.t_end:g} s "
-                            f"({scene.simulation.samples} samples, "
-                            f"{self.joint_states.get_subscription_count()} joint_states "
-                            f"subscribers)")
-        return response
+        self.get_logger().info(f"deploying {scene.name or scene.source} to "
+                               f"{scene.simulation.t_end:g} s ({scene.simulation.samples} samples)")
+        return self._run, (self.deployment, scene, params, prefix)
 
-    def _run(self, deployment, scene, params, prefix=""):
+    def _subscribers(self, wanted: int, deployment) -> int:
+        """joint_states subscribers, once ``wanted`` are there (at most
+        SUBSCRIBER_WAIT s; a stop ends the wait)."""
+        end = time.monotonic() + contract.SUBSCRIBER_WAIT
+        while (self.joint_states.get_subscription_count() < wanted and time.monotonic() < end
+               and not deployment.stopping.is_set()):
+            time.sleep(0.01)
+        return self.joint_states.get_subscription_count()
+
+    def _run(self, goal_handle, deployment, scene, params, prefix=""):
+        wanted = goal_handle.request.wait_for_subscribers
+        subscribers = self._subscribers(wanted, deployment)
+        if subscribers < wanted:
+            why = ("cancelled" if deployment.stopping.is_set()
+                   else f"after {contract.SUBSCRIBER_WAIT:g} s")
+            return Deploy.Result(success=False, status=-1, message=(
+                f"only {subscribers} of the {wanted} joint_states subscribers asked for, "
+                f"{why}: not deployed"))
         model = deployment.model
         pacer = Pacer(params.real_time_factor, deployment.stopping)
         # The contract's own bytes, as recordings store them: published as they are.
         encoder = SampleEncoder(model, prefix)
-        shown = -math.inf
-        if self.tf_static is not None:
-            self.tf_static.publish(encoder.tf_static())
+        shown = told = -math.inf
+        samples = 0
+        self.tf_static.publish(encoder.tf_static())
         start = time.monotonic()
         for s in deployment:
             pacer.wait(s.t)
             (clock, joint_state, panels, tf), = encoder.encode([s])
             self.clock.publish(clock)
             self.joint_states.publish(joint_state)
-            if self.tf is not None:
-                self.tf.publish(tf)
-            # Markers are for eyes: a display rate is enough.
+            samples += 1
+            self.tf.publish(tf)
+            # Markers and feedback are for eyes and progress bars: a display rate is enough.
             now = time.monotonic()
             if now - shown >= 1.0 / PANEL_RATE or s.t >= deployment.settings.t_end:
                 self.panels.publish(panels)
                 shown = now
+            if now - told >= 1.0 / FEEDBACK_RATE:
+                goal_handle.publish_feedback(Deploy.Feedback(t=float(s.t), samples=samples,
+                                                             subscribers=subscribers))
+                told = now
         published = time.monotonic() - start
         result = deployment.result
         s = deployment_summary(model, result, flat_tolerance=scene.simulation.flat_tolerance)
@@ -142,14 +150,11 @@ class DynamicsNode(runtime.WorkerNode):
         values["publish_wall_time"] = published  # s from the first block to the last message
         self.diagnostics.publish(messages.diagnostics(float(result.t[-1]), messages.status(
             self.get_fully_qualified_name(), contract.outcome_level(s), s["message"], values)))
+        return messages.deploy_result(s, len(result.t))
 
-    def _stop(self, request, response):
-        if not self.running:
-            response.success, response.message = False, "no deployment is running"
-            return response
-        self.deployment.stop()
-        response.success, response.message = True, "stopping at the end of the current block"
-        return response
+    def _stop(self):
+        if self.deployment is not None:
+            self.deployment.stop()
 
     def close(self):
         if self.running:

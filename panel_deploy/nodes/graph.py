@@ -1,5 +1,5 @@
 """``panel-deploy run``: the four nodes in one process on one executor, driven
-through their topics and services only, like any ROS client (the driver
+through their topics and actions only, like any ROS client (the driver
 would drive the same nodes in processes of their own).
 
 Real rclpy: ``ros2 topic echo /joint_states`` from another shell sees them.
@@ -15,12 +15,11 @@ import time
 from pathlib import Path
 
 import rclpy
-import yaml
+from rclpy.action import ActionClient
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.validate_namespace import validate_namespace
-from std_srvs.srv import Trigger
 
 from .. import contract
 from ..errors import SceneError, shown
@@ -39,79 +38,66 @@ TIMEOUT = 30.0
 
 
 class Driver(Node):
-    """The client side of ``run``: calls the services, follows the topics,
-    shows progress on stderr and builds the summary from what they carry."""
+    """The client side of ``run``: sends the optimise and deploy goals, follows
+    the topics, shows progress on stderr and builds the summary from what the
+    goals' results and the monitor's verdict carry."""
 
     def __init__(self, interrupt, recorder=None, **kwargs):
         super().__init__("panel_deploy_run", **kwargs)
         self.interrupt, self.recorder = interrupt, recorder
         self.group = ReentrantCallbackGroup()
-        # The nodes are this node's neighbours: their names resolve in its namespace.
-        self.dynamics, self.monitor = (self.resolve_topic_name(n)
-                                       for n in (contract.DEPLOY.node, contract.RESET.node))
-        self._triggers = {}
-        self.outcome = None   # values of the dynamics node's outcome status
         self.verdict = None   # values of the monitor's last verdict
-        self.events = []      # values of this deployment's collision events
-        self.result = None    # the optimiser's result (parsed YAML)
-        self.search_failed = None
-        self.deploying = False
+        self.events = []      # this deployment's collision events
+        self.goal = None      # the running goal's handle
         self.shown = -1.0
         self.exit_code = 1
         self.summary = None
-        for topic, callback in ((contract.DIAGNOSTICS, self._on_diagnostics),
-                                (contract.COLLISION_EVENTS, self._on_events),
-                                (contract.OPTIMISER_PROGRESS, self._on_progress),
-                                (contract.OPTIMISER_RESULT, self._on_result),
+        for topic, callback in ((contract.VERDICT, self._on_verdict),
+                                (contract.COLLISION_EVENTS, self._on_event),
                                 (contract.PANELS, self._on_panels)):
             runtime.subscription(self, topic, callback, callback_group=self.group)
+        self.actions = {a: ActionClient(self, messages.message_class(a.type), a.path,
+                                        callback_group=self.group)
+                        for a in contract.ACTIONS}
 
-    def call(self, service: contract.Service, retry: str = "no model yet") -> str:
-        """Call a Trigger ``service``; again while it refuses with ``retry`` (up to TIMEOUT)."""
-        service = service.path
-        if service not in self._triggers:
-            self._triggers[service] = self.create_client(Trigger, service, callback_group=self.group)
-        client = self._triggers[service]
-        if not client.wait_for_service(timeout_sec=TIMEOUT):
-            raise RuntimeError(f"{service}: no such service")
+    def run_goal(self, action: contract.Service, feedback=None, **goal):
+        """Send a goal to ``action`` and wait for its result; again while it is
+        aborted because the model has not reached the node yet (up to TIMEOUT)."""
+        client = self.actions[action]
+        if not client.wait_for_server(timeout_sec=TIMEOUT):
+            raise RuntimeError(f"{action.path}: no such action server")
         end = time.monotonic() + TIMEOUT
         while True:
-            done = threading.Event()
-            future = client.call_async(Trigger.Request())
-            future.add_done_callback(lambda _: done.set())
-            if not done.wait(TIMEOUT):
-                raise RuntimeError(f"{service}: no answer")
-            reply = future.result()
-            if reply.success:
-                return reply.message
-            if retry not in reply.message or time.monotonic() > end:
-                raise RuntimeError(f"{service}: {reply.message}")
+            sent = self._future(client.send_goal_async(
+                messages.message_class(action.type).Goal(**goal), feedback_callback=feedback))
+            self.goal = sent.result()
+            if not self.goal.accepted:
+                raise RuntimeError(f"{action.path}: goal rejected")
+            result = self._future(self.goal.get_result_async(), timeout=1e9).result().result
+            if result.success or "no model" not in result.message or time.monotonic() > end:
+                return result
             time.sleep(0.05)
 
-    def _on_diagnostics(self, msg):
-        for s in msg.status:
-            if s.name == self.dynamics:
-                self.outcome = {"level": s.level, "message": s.message, **messages.values(s)}
-            elif s.name == self.monitor:
-                self.verdict = messages.values(s)
+    def _future(self, future, timeout=TIMEOUT):
+        done = threading.Event()
+        future.add_done_callback(lambda _: done.set())
+        self._wait(done.is_set, "an answer", timeout)
+        return future
 
-    def _on_events(self, msg):
-        for s in msg.status:
-            self.events.append(messages.values(s))
-            print(f"  collision: {s.message}", file=sys.stderr, flush=True)
+    def _on_verdict(self, msg):
+        self.verdict = contract.verdict_values(msg)
 
-    def _on_progress(self, msg):
-        for s in msg.status:
-            if s.level == messages.ERROR:
-                self.search_failed = s.message
-                continue
-            v = messages.values(s)
-            print(f"  optimise {s.message:>8}: {v['evaluations']} evaluations, best f "
-                  f"{float(v['best_f']):+.5f}, feasible {v['feasible']}, "
-                  f"{float(v['elapsed']):.1f} s", file=sys.stderr, flush=True)
+    def _on_event(self, msg):
+        self.events.append(msg)
+        print(f"  collision: {contract.event_text(msg.body_a, msg.body_b, msg.t)}",
+              file=sys.stderr, flush=True)
 
-    def _on_result(self, msg):
-        self.result = yaml.safe_load(msg.data)
+    @staticmethod
+    def _on_progress(feedback):
+        p = feedback.feedback.progress
+        print(f"  optimise {p.phase:>8}: {p.evaluations} evaluations, best f "
+              f"{p.best_f:+.5f}, feasible {p.feasible}, {p.elapsed:.1f} s",
+              file=sys.stderr, flush=True)
 
     def _on_panels(self, msg):
         """A line every 0.1 s of simulated time (the panels come at a display rate)."""
@@ -142,52 +128,47 @@ class Driver(Node):
 
     def drive(self, optimise: bool) -> None:
         # The monitor says it has the model with its first verdict; the
-        # dynamics node and the optimiser refuse requests until theirs came.
+        # dynamics node and the optimiser abort goals until theirs came.
         self._wait(lambda: self.verdict is not None, "the model to reach the collision monitor")
         if optimise:
-            print(self.call(contract.OPTIMISE), file=sys.stderr, flush=True)
-            # The result is published once the optimiser has set its K on the dynamics node.
-            self._wait(lambda: self.result is not None or self.search_failed, "the optimiser",
-                       timeout=1e9)
-            if self.result is None or not self.result["success"]:
-                what = self.result["message"] if self.result else self.search_failed
-                print(f"optimise: {what}; deploying with the scene's stiffness",
+            result = self.run_goal(contract.OPTIMISE, self._on_progress)
+            if not result.success:
+                print(f"optimise: {result.message}; deploying with the scene's stiffness",
                       file=sys.stderr, flush=True)
-        # A sample sent before the monitor's subscription is known to the
-        # dynamics node is lost to it: in processes of their own, discovery takes a while.
-        self._wait(self._monitor_listens, "the collision monitor on joint_states")
         self.events.clear()
-        self.deploying = True
-        print(self.call(contract.DEPLOY), file=sys.stderr, flush=True)
-        self._wait(lambda: self.outcome is not None, "the deployment", timeout=1e9)
-        self._finish()
-
-    def _monitor_listens(self) -> bool:
-        topic = self.resolve_topic_name(contract.JOINT_STATES.name)
-        return any(f"{i.node_namespace.rstrip('/')}/{i.node_name}" == self.monitor
-                   for i in self.get_subscriptions_info_by_topic(topic))
+        # A sample sent before the monitor's (and the recorder's) subscription is
+        # matched is lost to it: in processes of their own, discovery takes a while.
+        result = self.run_goal(contract.DEPLOY,
+                               wait_for_subscribers=1 + (self.recorder is not None))
+        self.goal = None
+        self._finish(result)
 
     def stop_deployment(self) -> None:
-        """After an interrupt: stop a running deployment and summarise what was computed."""
-        if not self.deploying:
+        """After an interrupt: cancel a running goal; summarise what was computed."""
+        goal, self.goal = self.goal, None
+        if goal is None:
             return
-        try:
-            self.call(contract.STOP, retry="")
-        except RuntimeError:
-            pass  # none running: it has just ended
-        try:
-            if self._wait(lambda: self.outcome is not None, "", TIMEOUT, interruptible=False):
-                self._finish(interruptible=False)
-        except RuntimeError as e:  # interrupted anyway: say why there is no summary
-            print(f"panel-deploy: {e}", file=sys.stderr)
+        done = threading.Event()
+        goal.cancel_goal_async()
+        future = goal.get_result_async()
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(TIMEOUT):
+            print("panel-deploy: the goal did not end after its cancel", file=sys.stderr)
+            return
+        result = future.result().result
+        if hasattr(result, "summary"):  # a Deploy goal: what was computed is summarised
+            try:
+                self._finish(result, interruptible=False)
+            except RuntimeError as e:  # interrupted anyway: say why there is no summary
+                print(f"panel-deploy: {e}", file=sys.stderr)
 
-    def _finish(self, interruptible=True) -> None:
-        if "summary" not in self.outcome:  # the deployment failed (an ERROR status)
-            raise RuntimeError(self.outcome["message"])
-        published = self.outcome["samples"]
+    def _finish(self, result, interruptible=True) -> None:
+        if not result.summary:  # the deployment did not run or failed with an error
+            raise RuntimeError(result.message)
+        published = result.samples
         self._wait(lambda: (self.verdict or {}).get("samples", 0) >= published,
                    "the collision monitor", interruptible=interruptible)
-        self.summarise()
+        self.summarise(json.loads(result.summary))
         if self.recorder is not None:
             got = self.recorder.received
             self._wait(lambda: (got[contract.JOINT_STATES.name] >= published
@@ -196,17 +177,17 @@ class Driver(Node):
             time.sleep(0.2)  # the monitor's last events and verdict, published just now
             self.recorder.close(self.summary)
 
-    def summarise(self) -> None:
-        """The deployment's summary (the outcome's) with the monitor's verdict
-        and events as its collision part; sets the exit code."""
-        s = self.outcome["summary"]
+    def summarise(self, s: dict) -> None:
+        """The deployment's summary ``s`` (the Deploy result's) with the monitor's
+        verdict and events as its collision part; sets the exit code."""
         v = self.verdict
         pair = v.get("first_collision_pair")
         first = None if not pair else {"t": v["first_collision_t"], "pair": pair,
                                        "v": v["approach_speed"]}
         s["collision"] = {
             "collided": first is not None, "first_collision": first,
-            "colliding_pairs": [{key: e[key] for key in ("pair", "t", "approach_speed", "distance")}
+            "colliding_pairs": [{"pair": [e.body_a, e.body_b], "t": e.t,
+                                 "approach_speed": e.approach_speed, "distance": e.distance}
                                 for e in self.events],
             "v": first["v"] if first else 0.0, "d": v.get("d"), "d_time": v.get("d_time"),
             "d_pair": v.get("d_pair"), "samples_checked": v["samples"]}

@@ -8,12 +8,14 @@ the URDF (``world`` is the ground panel's flat frame).
 from __future__ import annotations
 
 import array
+import json
 from importlib import import_module
 
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
+from panel_deploy_interfaces.msg import CollisionEvent, MonitorVerdict, OptimiserProgress
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import JointState
@@ -21,13 +23,8 @@ from std_msgs.msg import ColorRGBA, String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from .. import contract
-from ..contract import HIT_COLOUR, event_fields
+from ..contract import HIT_COLOUR
 from ..errors import TrajectoryError, shown
-
-try:  # tf2_msgs has no wheel on PyPI: ``pip install ./vendor/tf2_msgs`` builds it
-    from tf2_msgs.msg import TFMessage
-except ImportError:
-    TFMessage = None
 
 FRAME = contract.WORLD
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
@@ -172,7 +169,43 @@ def diagnostics(t: float, *statuses) -> DiagnosticArray:
     return msg
 
 
-def event_status(name: str, event, origin: float = 0.0) -> DiagnosticStatus:
-    """One collision event's status named ``name``/event (the monitor's full
-    name), with the fields recordings carry (``event_fields``)."""
-    return status(name + contract.EVENT_SUFFIX, ERROR, *event_fields(event, origin))
+def collision_event(event, origin: float = 0.0, frame: str = FRAME) -> CollisionEvent:
+    """The ``CollisionEvent`` of ``event``: stamped ``origin`` + t (s, the
+    stream's clock), its point in ``frame`` (:func:`~panel_deploy.contract.event_message`)."""
+    fields = contract.event_message(event)
+    x, y, z = fields.pop("point")
+    msg = CollisionEvent(point=Point(x=x, y=y, z=z), **fields)
+    msg.header.stamp, msg.header.frame_id = stamp(origin + event.t), frame
+    return msg
+
+
+def verdict(level: int, text: str, values: dict, stamp_s: float) -> MonitorVerdict:
+    """The ``MonitorVerdict`` of a verdict's key-values, stamped ``stamp_s`` (s)."""
+    msg = MonitorVerdict(**contract.verdict_message(level, text, values))
+    msg.header.stamp = stamp(stamp_s)
+    return msg
+
+
+def progress(p, wall_s: float) -> OptimiserProgress:
+    """The ``OptimiserProgress`` of a search's progress report (optimise.search.Progress)."""
+    msg = OptimiserProgress(phase=p.phase, evaluations=p.nfev, best_f=float(p.best_f),
+                            feasible=bool(not p.collision and p.reached_flat),
+                            elapsed=float(p.elapsed))
+    msg.header.stamp = stamp(wall_s)
+    return msg
+
+
+def deploy_result(summary: dict, samples: int):
+    """The Deploy action's result of a deployment summary
+    (:func:`panel_deploy.summary.deployment_summary`) and the samples published."""
+    from panel_deploy_interfaces.action import Deploy
+
+    def number(key):  # None (never flat, not computed) as NaN
+        return float("nan") if summary[key] is None else float(summary[key])
+
+    return Deploy.Result(
+        success=bool(summary["success"]), status=int(summary["status"]),
+        message=summary["message"], samples=samples, nsteps=int(summary["nsteps"]),
+        summary=json.dumps(summary),
+        **{k: number(k) for k in ("t_end", "time_to_flat", "energy_balance_error",
+                                  "max_constraint_gap", "wall_time")})

@@ -1,25 +1,29 @@
 """``optimiser`` node: the stiffness optimisation of Eq. (8) as a service.
 
-``~/optimise`` answers at once and searches in the background on the model
-last received; progress goes to ``~/progress``, a feasible K is set on the
-``target_node``'s ``stiffness`` (and ``damping_ratio`` when searched) through
-its ``set_parameters`` service (a relative name is in this node's namespace),
-then the result (YAML, as ``panel-deploy optimise`` writes it) goes to
-``~/result``. A failed search ends as an ERROR on ``~/progress``. ``~/cancel``
-stops with the best K so far.
+A goal on the ``~/optimise`` action (``panel_deploy_interfaces/action/Optimise``)
+searches on the model last received; progress is the goal's feedback and
+goes to ``~/progress`` (``OptimiserProgress``, for recorders) too; a feasible
+K is set on the ``target_node``'s ``stiffness`` (and ``damping_ratio`` when
+searched) through its ``set_parameters`` service (a relative name is in this
+node's namespace), then the result (YAML, as ``panel-deploy optimise`` writes
+it) is the goal's result and goes to ``~/result``. Cancelling the goal stops
+with the best K so far; a goal that cannot run is aborted with the reason.
 """
 
 from __future__ import annotations
 
+import math
 import threading
+import time
 
+from panel_deploy_interfaces.action import Optimise
 from rcl_interfaces.srv import SetParameters
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.parameter import Parameter
 
 from .. import contract
 from ..build import build_model
-from ..errors import PanelDeployError, SceneError, shown
+from ..errors import SceneError, shown
 from ..scene_text import optimisation_scene
 from ..optimise import optimise
 from ..optimise.io import dump_result, result_to_dict
@@ -47,11 +51,12 @@ class OptimiserNode(runtime.WorkerNode):
         runtime.declare(self, PARAMETERS, self._check)
         self.progress = runtime.publisher(self, contract.OPTIMISER_PROGRESS)
         self.result_pub = runtime.publisher(self, contract.OPTIMISER_RESULT)
-        runtime.trigger_service(self, contract.OPTIMISE, self._optimise)
-        runtime.trigger_service(self, contract.CANCEL, self._cancel)
+        self.diagnostics = runtime.publisher(self, contract.DIAGNOSTICS)
+        self._cancel_event = threading.Event()
+        self.action_server(contract.OPTIMISE, self._optimise, self._cancel_event.set,
+                           self.diagnostics)
         self._client_group = MutuallyExclusiveCallbackGroup()
         self._targets = {}  # set_parameters clients by service name
-        self._cancel_event = threading.Event()
 
     def _check(self, changes):
         self._target_service(changes.get("target_node", self.get_parameter("target_node").value))
@@ -75,42 +80,39 @@ class OptimiserNode(runtime.WorkerNode):
                                   method=p["method"], damping_ratio_bounds=p["damping_ratio_bounds"],
                                   seed=None if p["seed"] < 0 else p["seed"]), p
 
-    def _optimise(self, request, response):
-        if self.busy(response, "an optimisation", contract.CANCEL):
-            return response
-        try:
-            scene, p = self._search_scene()
-            model = build_model(scene)
-        except PanelDeployError as e:
-            response.success, response.message = False, str(e)
-            return response
+    def _optimise(self, goal_handle):
+        scene, p = self._search_scene()
+        model = build_model(scene)
         self._cancel_event.clear()
-        self.start_job("the optimisation", self.progress, self._run, model, scene, p)
-        response.success = True
-        response.message = f"optimising {scene.name or scene.source} ({scene.optimisation.method}, " \
-                           f"at most {scene.optimisation.max_evaluations} evaluations)"
-        return response
+        self.get_logger().info(f"optimising {scene.name or scene.source} "
+                               f"({scene.optimisation.method}, at most "
+                               f"{scene.optimisation.max_evaluations} evaluations)")
+        return self._run, (model, scene, p)
 
-    def _report(self, progress):
-        self.progress.publish(messages.diagnostics(progress.elapsed, messages.status(
-            self.get_fully_qualified_name(), messages.OK, progress.phase,
-            {"evaluations": progress.nfev, "best_f": progress.best_f,
-             "feasible": not progress.collision and progress.reached_flat,
-             "elapsed": progress.elapsed})))
-
-    def _run(self, model, scene, p):
+    def _run(self, goal_handle, model, scene, p):
+        def report(progress):
+            msg = messages.progress(progress, time.time())
+            self.progress.publish(msg)
+            goal_handle.publish_feedback(Optimise.Feedback(progress=msg))
         try:
             result = optimise(model, scene, workers=p["workers"],
-                              dask_address=p["dask_address"] or None, progress=self._report,
+                              dask_address=p["dask_address"] or None, progress=report,
                               stop=self._cancel_event.is_set)
         except Cancelled:
-            self.get_logger().info("cancelled before the first evaluation: no result")
-            return
+            return Optimise.Result(success=False, message="cancelled before the first "
+                                                          "evaluation: no result")
         self.get_logger().info(result.message)
-        if result_to_dict(result)["success"]:  # false too if a value came out non-finite
+        success = result_to_dict(result)["success"]  # false too if a value came out non-finite
+        if success:
             self._set_target(p["target_node"], result)
+        text = dump_result(result, scene.name)
         # Last: a client that has the result knows the target has its K.
-        self.result_pub.publish(messages.string(dump_result(result, scene.name)))
+        self.result_pub.publish(messages.string(text))
+        ratio = (float(result.c[0] / result.k[0]) if result.problem.damping_variable
+                 else math.nan)
+        return Optimise.Result(success=bool(success), message=result.message,
+                               stiffness=[float(k) for k in result.k], damping_ratio=ratio,
+                               result=text)
 
     def _set_target(self, target, result):
         values = [Parameter("stiffness", Parameter.Type.DOUBLE_ARRAY, [float(k) for k in result.k])]
@@ -133,14 +135,6 @@ class OptimiserNode(runtime.WorkerNode):
         refused = [r.reason for r in future.result().results if not r.successful]
         if refused:
             self.get_logger().error(f"{target} refused the result: {refused[0]}")
-
-    def _cancel(self, request, response):
-        if not self.running:
-            response.success, response.message = False, "no optimisation is running"
-            return response
-        self._cancel_event.set()
-        response.success, response.message = True, "stopping after the current batch"
-        return response
 
     def close(self):
         self._cancel_event.set()

@@ -5,7 +5,7 @@ the path ``simulate --record`` takes too (see there what it writes).
 Messages are recorded as received (CDR bytes) under their resolved names,
 so a graph in a namespace keeps it. ``/tf`` and ``/tf_static`` are written
 by the writer from the deployed model, as robot_state_publisher would: the
-dynamics node's own are global and need tf2_msgs (no wheel; vendor/tf2_msgs
+dynamics node's own are global and need tf2_msgs (no wheel; vendor/interfaces
 builds it), and a recording needs neither.
 """
 

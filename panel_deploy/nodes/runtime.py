@@ -21,6 +21,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
 from std_srvs.srv import Trigger
 
 from .. import contract
@@ -179,9 +180,9 @@ def _validator(node, check):
 
 
 class WorkerNode(Node):
-    """A node that follows ``panel_deploy/model`` and runs one long job at a
-    time (a deployment, a search) in a thread of its own, so that its
-    services answer at once."""
+    """A node that follows ``panel_deploy/model`` and serves one long job at a
+    time (a deployment, a search) as an action: each goal runs in a thread of
+    its own, so that the executor goes on serving while it runs."""
 
     def __init__(self, name, **kwargs):
         super().__init__(name, **kwargs)
@@ -199,33 +200,60 @@ class WorkerNode(Node):
     def running(self) -> bool:
         return self._worker is not None and self._worker.is_alive()
 
-    def busy(self, response, job: str, stop: contract.Service) -> bool:
-        """Refuse in ``response`` (and return True) while ``job`` runs (``stop``
-        ends it) or before a model came."""
-        if self.running:
-            response.success, response.message = False, f"{job} is running; ~/{stop.name} it first"
-        elif self.scene is None:
-            response.success, response.message = False, (
-                "no model yet on " + self.resolve_topic_name(contract.MODEL.name))
-        else:
-            return False
-        return True
+    def action_server(self, action: contract.Service, start, cancel, report):
+        """The contract's ``action`` (``~/`` + its name). Every goal is accepted;
+        ``start(goal)`` returns ``(target, args)`` to run in the worker thread,
+        whose return value is the goal's result, or raises a PanelDeployError
+        whose message aborts the goal (the caller learns why, unlike a
+        rejection). A goal that comes while one runs, or before a model, is
+        aborted so too. ``cancel()`` asks the running job to end early. An
+        exception in the job ends it, not the node: it is logged, aborts the
+        goal and goes out as an ERROR status on ``report`` (a DiagnosticArray
+        publisher) for diagnostics tools; the next goal runs."""
+        from rclpy.action import ActionServer, CancelResponse
 
-    def start_job(self, job: str, report, target, *args) -> None:
-        """Run ``target(*args)`` in the worker thread. An exception ends the
-        job, not the node: it is logged and ends as an ERROR status on
-        ``report`` (a DiagnosticArray publisher), and the next request runs."""
-        def guarded():
+        result_type = messages.message_class(action.type).Result
+        job = f"~/{action.name}"
+
+        async def execute(goal_handle):
             try:
-                target(*args)
-            except Exception as e:
-                text = f"{job} failed: {type(e).__name__}: {e}"
-                self.get_logger().error(text)
-                report.publish(messages.diagnostics(
-                    self.get_clock().now().nanoseconds * 1e-9,
-                    messages.status(self.get_fully_qualified_name(), messages.ERROR, text)))
-        self._worker = threading.Thread(target=guarded, daemon=True)
-        self._worker.start()
+                if self.running:
+                    raise PanelDeployError(f"{job} is running: cancel its goal first")
+                if self.scene is None:
+                    raise PanelDeployError("no model yet on " +
+                                           self.resolve_topic_name(contract.MODEL.name))
+                target, args = start(goal_handle)
+            except PanelDeployError as e:
+                goal_handle.abort()
+                return result_type(success=False, message=str(e))
+            done = Future()
+
+            def guarded():
+                try:
+                    done.set_result(target(goal_handle, *args))
+                except Exception as e:  # the job ends, not the node: the caller learns why
+                    text = f"{job} failed: {type(e).__name__}: {e}"
+                    self.get_logger().error(text)
+                    report.publish(messages.diagnostics(
+                        self.get_clock().now().nanoseconds * 1e-9,
+                        messages.status(self.get_fully_qualified_name(), messages.ERROR, text)))
+                    done.set_result(result_type(success=False, message=text))
+            self._worker = threading.Thread(target=guarded, daemon=True)
+            self._worker.start()
+            result = await done
+            if goal_handle.is_cancel_requested:
+                goal_handle.canceled()
+            elif result.success:
+                goal_handle.succeed()
+            else:
+                goal_handle.abort()
+            return result
+
+        def on_cancel(goal_handle):
+            cancel()
+            return CancelResponse.ACCEPT
+        return ActionServer(self, messages.message_class(action.type), f"~/{action.name}",
+                            execute, cancel_callback=on_cancel)
 
 
 def spin(nodes, stop: threading.Event) -> None:

@@ -12,8 +12,8 @@ samples as ``panel-deploy simulate`` (the paper's D_j, stopping at the first
 collision) and writes each collision event to
 ``panel_deploy/collision_events`` and ``panel_deploy/collision_markers`` at
 the sample that revealed it. At the end, the outcome and the monitor's
-verdict on ``/diagnostics`` (as the nodes send them) and as the ``outcome``
-metadata record.
+verdict on ``/diagnostics`` and the verdict on ``collision_monitor/verdict``
+(as the nodes send them) and as the ``outcome`` metadata record.
 """
 
 from __future__ import annotations
@@ -93,8 +93,8 @@ def record_deployment(path, scene, model):
                 if check.check is None or not check.check.collided:
                     events = check.update(s.t, s.theta[:n], s.omega[:n])
                     if events:
-                        rec.write(contract.COLLISION_EVENTS, m.diagnostics(
-                            s.t, *(m.event_status(monitor, e) for e in events)), ns)
+                        for e in events:
+                            rec.write(contract.COLLISION_EVENTS, m.collision_event(e), ns)
                         R, p = forward_kinematics(model, s.theta[:n])[:2]
                         rec.write(contract.COLLISION_MARKERS,
                                   m.collision_markers(model, events[0], R, p), ns)
@@ -106,6 +106,7 @@ def record_deployment(path, scene, model):
         rec.write(contract.DIAGNOSTICS, m.diagnostics(
             t_end, m.outcome_status(contract.status_name("", "dynamics"), summary, len(result.t)),
             m.status(monitor, level, text, values)), m.nanoseconds(t_end))
+        rec.write(contract.VERDICT, m.verdict(level, text, values, t_end), m.nanoseconds(t_end))
         rec.close(summary)
     return result, report
 

@@ -4,7 +4,9 @@ Same topics, types and contents as the node suite (``panel_deploy/nodes``):
 times are simulated seconds, frames follow the URDF of
 :func:`panel_deploy.export.urdf.model_urdf` (``world`` is the flat array
 frame; one link per body, named ``Body.name``). Types come from the rosbags
-ROS 2 Jazzy type store (``tf2_msgs`` included, which is not pip-installable);
+ROS 2 Jazzy type store (``tf2_msgs`` included, which is not pip-installable)
+and our own ``panel_deploy_interfaces`` messages, registered from their .msg
+text (:func:`panel_deploy.contract.definitions`);
 :func:`serialize` turns a message into its CDR bytes, as ROS 2 sends them.
 """
 
@@ -13,16 +15,19 @@ from __future__ import annotations
 import struct
 
 import numpy as np
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from .. import contract
 from ..contract import nanoseconds
 # The contract's type names and levels, here too for readers of recordings (m.JOINT_STATE).
-from ..contract import (CLOCK, DIAGNOSTIC_ARRAY, ERROR, JOINT_STATE, MARKER_ARRAY,  # noqa: F401
-                        HIT_COLOUR, OK, PANEL_COLOUR, STRING, TF_MESSAGE, WARN, WORLD, event_fields)
+from ..contract import (CLOCK, COLLISION_EVENT, DIAGNOSTIC_ARRAY, ERROR,  # noqa: F401
+                        JOINT_STATE, MARKER_ARRAY, MONITOR_VERDICT, HIT_COLOUR, OK, PANEL_COLOUR,
+                        STRING, TF_MESSAGE, WARN, WORLD)
 from ..frames import quaternions
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+for _name, _text in contract.definitions().items():
+    TYPESTORE.register(get_types_from_msg(_text, _name))
 _T = TYPESTORE.types
 
 #: The recorded topics, by resolved name in the root namespace: (type, QoS).
@@ -182,10 +187,18 @@ def diagnostics(t: float, *statuses):
     return _T[DIAGNOSTIC_ARRAY](header=_header(t), status=list(statuses))
 
 
-def event_status(monitor: str, event):
-    """One collision event's DiagnosticStatus (:func:`~panel_deploy.contract.event_fields`),
-    named after the monitor's status name ``monitor``."""
-    return status(monitor + contract.EVENT_SUFFIX, ERROR, *event_fields(event))
+def collision_event(event, origin: float = 0.0, frame: str = WORLD):
+    """The ``CollisionEvent`` of ``event`` as the collision monitor sends it:
+    stamped ``origin`` + t (s), its point in ``frame``."""
+    fields = contract.event_message(event)
+    point = _vector(fields.pop("point"), "Point")
+    return _T[COLLISION_EVENT](header=_header(origin + event.t, frame), point=point, **fields)
+
+
+def verdict(level: int, text: str, values: dict, stamp_s: float):
+    """The monitor's ``MonitorVerdict`` of a verdict's key-values, stamped ``stamp_s`` (s)."""
+    return _T[MONITOR_VERDICT](header=_header(stamp_s),
+                               **contract.verdict_message(level, text, values))
 
 
 def outcome_status(name: str, summary: dict, samples: int):

@@ -53,6 +53,9 @@ setup(
     license="Apache-2.0",
     python_requires=">=3.11",
     packages=find_packages(exclude=["test", "test.*", "bench"]),
+    # The interface package's definitions: the core reads them (recordings' schemas).
+    package_data={"panel_deploy.contract": ["interfaces/*.txt", "interfaces/*.xml",
+                                            "interfaces/msg/*.msg", "interfaces/action/*.action"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

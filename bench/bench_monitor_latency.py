@@ -33,6 +33,7 @@ import ros_env  # noqa: E402
 ros_env.isolate()  # DDS stays on this machine (before rclpy starts)
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from panel_deploy_interfaces.msg import CollisionEvent  # noqa: E402
 from ros_harness import Client, NodeProcess, checked_samples, wait_for  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
@@ -77,7 +78,7 @@ def once(client, publisher, events, diagnostics, t, msgs):
     done = time.perf_counter() - last_sent
     latency = None
     if events and client.arrivals:
-        sample = int(next(kv.value for kv in events[0].status[0].values if kv.key == "sample"))
+        sample = events[0].sample
         latency = client.arrivals[0] - sent[sample]
     return latency, checked, done
 
@@ -94,9 +95,9 @@ def main(argv=None) -> int:
         publisher = client.node.create_publisher(JointState, "/joint_states",
                                                  messages.qos(contract.STREAM))
         diagnostics = client.listen(DiagnosticArray, "/diagnostics")
-        events = client.listen(DiagnosticArray, "/panel_deploy/collision_events")
+        events = client.listen(CollisionEvent, "/panel_deploy/collision_events")
         client.node.create_subscription(
-            DiagnosticArray, "/panel_deploy/collision_events",
+            CollisionEvent, "/panel_deploy/collision_events",
             lambda _: client.arrivals.append(time.perf_counter()), messages.qos(contract.EVENTS))
         wait_for(lambda: publisher.get_subscription_count() >= 1, timeout=60, what="the monitor")
         wait_for(lambda: diagnostics, timeout=60, what="the model at the monitor")

@@ -31,6 +31,7 @@ ros_env.isolate()
 
 import numpy as np  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from panel_deploy_interfaces.msg import CollisionEvent  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from panel_deploy import contract  # noqa: E402
@@ -62,8 +63,7 @@ def dynamics_throughput(client, repeats):
         states.clear()
         diagnostics.clear()
         start = time.perf_counter()
-        reply = client.trigger("/dynamics/deploy")
-        assert reply.success, reply.message
+        client.send_goal(contract.DEPLOY, "/dynamics")
         wait_for(lambda: len(states) >= scene.simulation.samples, timeout=120, what="the run")
         received.append(time.perf_counter() - start)
         wait_for(lambda: diagnostics, what="the outcome")
@@ -135,11 +135,11 @@ def event_latency(client):
     result = simulate(model, scene.simulation)
     names, theta, omega, torque = hinge_states(model, result)
     publisher = client.node.create_publisher(JointState, "/joint_states", messages.qos(contract.STREAM))
-    events = client.listen(DiagnosticArray, "/panel_deploy/collision_events")
+    events = client.listen(CollisionEvent, "/panel_deploy/collision_events")
     client.trigger("/collision_monitor/reset")
     events.clear()
     sent, arrived = {}, []
-    client.node.create_subscription(DiagnosticArray, "/panel_deploy/collision_events",
+    client.node.create_subscription(CollisionEvent, "/panel_deploy/collision_events",
                                     lambda _: arrived.append(time.perf_counter()), messages.qos(contract.EVENTS))
     start = time.perf_counter()
     for j in range(len(result.t)):
@@ -148,7 +148,7 @@ def event_latency(client):
         sent[j] = time.perf_counter()
         publisher.publish(messages.joint_state(names, result.t[j], theta[j], omega[j], torque[j]))
     wait_for(lambda: events and arrived, what="the event")
-    sample = int(next(kv.value for kv in events[0].status[0].values if kv.key == "sample"))
+    sample = events[0].sample
     print(f"latency from the JointState that reveals the first collision (sample {sample}, "
           f"200 Hz real time) to its event: {(arrived[0] - sent[sample]) * 1e3:.1f} ms "
           f"(resolution: one 5 ms sample period)")
@@ -163,11 +163,7 @@ def main():
              NodeProcess("dynamics", "real_time_factor:=0.0")]
     client = Client("bench_nodes")
     try:
-        def deployable():  # the model has reached the node
-            reply = client.trigger("/dynamics/deploy")
-            return reply.success or "no model" not in reply.message
-        wait_for(deployable, timeout=120, what="the dynamics node")
-        wait_for(lambda: not client.trigger("/dynamics/stop").success, what="the first run")
+        client.start_goal(contract.DEPLOY, "/dynamics").result()  # the model has reached it
         dynamics_throughput(client, args.repeats)
         procs[1].stop()
         procs.append(NodeProcess("collision_monitor"))

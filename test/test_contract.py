@@ -122,6 +122,15 @@ def test_live_nodes_publish_the_contract_with_its_qos(graph):
         assert offered == {"/" + action.path: [action.type]}
 
 
+def test_the_installed_package_holds_the_interface_definitions():
+    """Package data: recordings embed these schemas, readers register them."""
+    assert set(contract.definitions()) == {contract.COLLISION_EVENT, contract.MONITOR_VERDICT,
+                                           contract.OPTIMISER_PROGRESS_MSG}
+    assert {p.name for p in (contract.INTERFACES_DIR / "action").iterdir()} == {
+        "Deploy.action", "Optimise.action"}
+    assert (contract.INTERFACES_DIR / "package.xml").is_file()
+
+
 def test_message_fields_come_from_the_verdict_values_and_back():
     values = {"deployment": 1, "origin": 2.5, "t": 0.4, "samples": 81, "d": None,
               "d_pair": [], "measured": ["a", "b"], "solved": [], "expected": None,

@@ -5,9 +5,11 @@
 Arguments: scene, rate_hz, real_time_factor, use_sim_time, namespace, frame_prefix. Then
 ``ros2 action send_goal /dynamics/deploy panel_deploy_interfaces/action/Deploy
 "{wait_for_subscribers: 1}" --feedback`` deploys the array;
-with ``namespace:=array1`` every topic and service but /diagnostics, /clock,
+with ``namespace:=array1`` every topic, service and action but /diagnostics,
 /tf and /tf_static is under /array1, so that several arrays run side by side
-(``frame_prefix:=array1/`` keeps their frames apart on the global /tf).
+(``frame_prefix:=array1/`` keeps their frames apart on the global /tf); the
+clock too, /array1/clock, which the nodes read as /clock (a remap) with
+``use_sim_time:=true``.
 """
 
 import os
@@ -18,6 +20,8 @@ from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
+
+from panel_deploy import contract
 
 NODES = ("array_model", "dynamics", "collision_monitor", "optimiser")
 
@@ -48,8 +52,9 @@ def generate_launch_description():
                      "frame_prefix": LaunchConfiguration("frame_prefix")},
         "collision_monitor": {"frame_prefix": LaunchConfiguration("frame_prefix")},
     }
+    # The array's own simulated clock: /clock resolves in the namespace (/array1/clock).
     nodes = [Node(package="panel_deploy", executable=name, name=name, output="screen",
-                  namespace=LaunchConfiguration("namespace"),
+                  namespace=LaunchConfiguration("namespace"), remappings=[contract.CLOCK_REMAP],
                   parameters=[params, {"use_sim_time": sim_time, **overrides.get(name, {})}])
              for name in NODES]
     return LaunchDescription(arguments + nodes)

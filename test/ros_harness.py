@@ -173,10 +173,13 @@ class Goal:
 class NodeProcess:
     """A node executable run as its own process with ``--ros-args``."""
 
-    def __init__(self, name, *params, node_name=None, namespace=None, params_file=None):
+    def __init__(self, name, *params, node_name=None, namespace=None, params_file=None,
+                 remaps=()):
         args = [executable(name), "--ros-args"]
         for p in params:
             args += ["-p", p]
+        for rule in remaps:
+            args += ["-r", ":=".join(rule)]
         if node_name:  # a name of its own, to tell this process from others of its kind
             args += ["-r", f"__node:={node_name}"]
         if namespace:

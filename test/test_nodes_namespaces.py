@@ -1,8 +1,10 @@
 """Two arrays side by side, each graph in a namespace of its own (separate node
 processes): every node hears only its own array, and each verdict is its own."""
 
+import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+from rosgraph_msgs.msg import Clock
 from panel_deploy_interfaces.msg import CollisionEvent
 from rcl_interfaces.srv import GetParameters
 from ros_harness import Client, NodeProcess, wait_for
@@ -25,11 +27,16 @@ def arrays(compiled_nodes):
         procs += [NodeProcess("array_model", "scene:=paper_4x4", namespace=ns),
                   NodeProcess("dynamics", f"t_end:={T_END}", "real_time_factor:=0.0", *extra,
                               namespace=ns),
-                  NodeProcess("collision_monitor", namespace=ns)]
+                  # Sim time from its own array's clock: /clock is remapped to <ns>/clock.
+                  NodeProcess("collision_monitor", "use_sim_time:=true", namespace=ns,
+                              remaps=[contract.CLOCK_REMAP])]
     client = Client("namespaces_test")
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")
     events = {ns: client.listen(CollisionEvent, f"{ns}/panel_deploy/collision_events")
               for ns in ARRAYS}
+    for ns in ARRAYS:
+        client.listen(Clock, f"{ns}/clock", messages.qos(contract.STREAM))
+    client.listen(Clock, "/clock", messages.qos(contract.STREAM))
     yield client, diagnostics, events
     client.close()
     for p in procs:
@@ -80,6 +87,15 @@ def test_each_array_has_its_own_topics_and_verdict(arrays):
     assert events["/array1"] and not events["/array2"]
     assert {e.header.frame_id for e in events["/array1"]} == {"world"}
     assert events["/array1"][0].body_a == "r1c2+r1c3"
+    # Each array's own sim time, never the other's: no clock goes back, none on /clock.
+    for ns in ARRAYS:
+        stamps = [messages.seconds(c.clock) for c in client.received[f"{ns}/clock"]]
+        assert stamps and stamps[-1] == pytest.approx(T_END) and all(np.diff(stamps) > 0), ns
+    assert client.received["/clock"] == []
+    # With use_sim_time and the stream over (its clock stopped), verdicts go on.
+    count = len(statuses(diagnostics, "/array1/collision_monitor"))
+    wait_for(lambda: len(statuses(diagnostics, "/array1/collision_monitor")) > count + 2,
+             what="verdicts after the sim clock stopped")
     # A stream of the other array would have been refused (stamps going back, a WARN each).
     for ns in ARRAYS:
         assert not [s for s in statuses(diagnostics, f"{ns}/collision_monitor")

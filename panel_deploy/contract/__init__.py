@@ -16,7 +16,8 @@ topic name or a QoS appears anywhere else in the package).
 Names: a topic name without a leading ``/`` is relative and resolves in the
 graph's namespace (``joint_states`` is ``/array7/joint_states`` for a graph
 run with ``--namespace array7``); a leading ``/`` marks a global topic, as
-ROS's own ``/diagnostics``, ``/clock``, ``/tf`` and ``/tf_static`` are. A
+ROS's own ``/diagnostics``, ``/tf`` and ``/tf_static`` are. The simulated
+clock is relative (``/array7/clock``), so two arrays do not interleave time. A
 recording keeps the resolved (namespaced) names.
 
 :mod:`.cdr` builds the messages a deployment sends at every sample (and
@@ -117,7 +118,13 @@ MODEL = Topic("panel_deploy/model", STRING, LATCHED, "array_model")
 DEPLOYED_SCENE = Topic("dynamics/scene", STRING, LATCHED, "dynamics")
 JOINT_STATES = Topic("joint_states", JOINT_STATE, STREAM, "dynamics", stamped=True)
 PANELS = Topic("panel_deploy/panels", MARKER_ARRAY, EVENTS, "dynamics", stamped=True)
-CLOCK_TOPIC = Topic("/clock", CLOCK, STREAM, "dynamics", stamped=True)
+#: Relative, so that arrays side by side keep their own simulated time
+#: (``/array1/clock``); in the root namespace it is ROS's ``/clock``. Nodes that
+#: take their time from it under a namespace need the remap :data:`CLOCK_REMAP`.
+CLOCK_TOPIC = Topic("clock", CLOCK, STREAM, "dynamics", stamped=True)
+#: ``--ros-args -r /clock:=clock``: rclpy's time source (use_sim_time) reads
+#: ``/clock``; this makes it the array's own clock in the node's namespace.
+CLOCK_REMAP = ("/clock", "clock")
 TF = Topic("/tf", TF_MESSAGE, EVENTS, "dynamics", stamped=True)
 TF_STATIC = Topic("/tf_static", TF_MESSAGE, LATCHED, "dynamics")
 DIAGNOSTICS = Topic("/diagnostics", DIAGNOSTIC_ARRAY, EVENTS, "dynamics, collision_monitor, optimiser",

@@ -28,6 +28,7 @@ import time
 
 import numpy as np
 
+from rclpy.clock import Clock as RosClock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 
@@ -91,7 +92,10 @@ class CollisionMonitorNode(Node):
         runtime.trigger_service(self, contract.RESET, self._reset)
         self._throttle = Throttle()
         self._apply()
-        self.create_timer(VERDICT_PERIOD, self._publish_verdict)
+        # Wall time, whatever use_sim_time says: a stream that stops (and its /clock
+        # with it) must still get the verdict that says so.
+        self.create_timer(VERDICT_PERIOD, self._publish_verdict,
+                          clock=RosClock(clock_type=ClockType.STEADY_TIME))
 
     def _collision(self, changes=None) -> tuple:
         """``(settings, receipt)``: the scene's collision settings with the

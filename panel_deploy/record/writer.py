@@ -310,7 +310,7 @@ def _stamp_ns(message) -> int | None:
     """The simulated-time stamp of a contract message, ns (None without one)."""
     if hasattr(message, "header"):
         stamp = message.header.stamp
-    elif hasattr(message, "clock"):
+    elif message.__msgtype__ == contract.CLOCK:
         stamp = message.clock
     elif getattr(message, "markers", None):
         stamp = message.markers[0].header.stamp

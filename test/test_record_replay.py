@@ -67,6 +67,13 @@ def test_saved_rrd_has_every_panel_moving_one_frame_per_sample(recording, model,
     texts = values["/events"]["TextLog:text"]
     assert texts and "r1c2+r1c3" in texts[0][0] and "r2c2+r2c3" in texts[0][0]
     assert times["/events"] == {round(0.42e9)}  # the sample that reveals the first collision
+    # The recording's own monitor, read back: its events and its verdict.
+    said = values["/monitor"]["TextLog:text"]
+    assert any("r1c2+r1c3" in s[0] and "approach speed" in s[0] for s in said)
+    assert any(s[0].startswith("verdict: collision between") for s in said)
+    # events at the collision's own time (between samples), the verdict at the end
+    assert min(times["/monitor"]) == pytest.approx(0.416e9, abs=1e6)
+    assert max(times["/monitor"]) == round(2e9)
 
 
 def test_png_strip(recording, tmp_path, capsys):

@@ -19,7 +19,7 @@ class Status(IntEnum):
     message says where and what)."""
 
     REACHED_T_END = 0
-    #: Stopped on request before t_end (the dynamics node's ``~/stop``, Ctrl-C):
+    #: Stopped on request before t_end (a cancelled Deploy goal, Ctrl-C):
     #: not a failure of the integration, but not a whole run either, so
     #: ``success`` is False (unlike scipy's 1, an event's termination).
     STOPPED = 1

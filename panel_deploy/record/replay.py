@@ -16,8 +16,12 @@ frame per joint state):
 - ``distance/d``: the smallest distance between panels that share no hinge
   (m), up to the first collision.
 - ``events``: one text line per first-collision event, at its sample.
+- ``monitor``: what the recording's own collision monitor said, as recorded
+  (``CollisionEvent`` and ``MonitorVerdict`` messages: each event, and each
+  verdict that changes level or text), at its stamp on the same timeline; a
+  live run's monitor saw the stream as it came, which the check above repeats.
 
-The blueprint opens on the 3D view beside the plots and the event log.
+The blueprint opens on the 3D view beside the plots and the two logs.
 """
 
 from __future__ import annotations
@@ -80,6 +84,31 @@ def collision_events(d: RecordedDeployment):
     return distance, check.first_events
 
 
+def recorded_monitor(d: RecordedDeployment) -> list:
+    """``[(t, level, text)]``: every collision event and every change of the
+    verdict that the recording's collision monitor published (t in s on the
+    joint states' timeline, level 0 OK, 1 WARN, 2 ERROR); empty for a
+    recording without them (a real array's, or one of an older format)."""
+    from .. import contract
+    from .messages import seconds
+
+    rec, out = d.recording, []
+    topic = rec.topic(contract.COLLISION_EVENTS)
+    if rec.topics.get(topic) == contract.COLLISION_EVENT:
+        for _, e in rec.messages(topic):
+            out.append((seconds(e.header.stamp) - d.track.t0, contract.ERROR,
+                        f"{contract.event_text(e.body_a, e.body_b, e.t)}, approach speed "
+                        f"{e.approach_speed:.4f} m/s"))
+    topic, said = rec.topic(contract.VERDICT), None
+    if rec.topics.get(topic) == contract.MONITOR_VERDICT:
+        for _, v in rec.messages(topic):
+            if (v.level, v.message) != said:
+                said = (v.level, v.message)
+                out.append((seconds(v.header.stamp) - d.track.t0, int(v.level),
+                            f"verdict: {v.message} ({v.samples} samples checked)"))
+    return sorted(out, key=lambda x: x[0])
+
+
 def _duration(t):
     """Seconds as exact nanosecond durations (a float second count would be truncated)."""
     return np.round(np.asarray(t) * 1e9).astype(np.int64).astype("timedelta64[ns]")
@@ -130,6 +159,10 @@ def log_deployment(stream, d: RecordedDeployment) -> int:
                                         level=rr.TextLogLevel.ERROR))
         stream.log(_path("world", "collisions"), rr.Points3D([e.point], colors=[HIT_RGBA],
                                                              radii=[0.004]))
+    levels = (rr.TextLogLevel.INFO, rr.TextLogLevel.WARN, rr.TextLogLevel.ERROR)
+    for when, level, text in recorded_monitor(d):
+        stream.set_time(TIMELINE, duration=_duration(max(when, 0.0)))
+        stream.log("monitor", rr.TextLog(text, level=levels[min(level, 2)]))
     return len(t)
 
 
@@ -142,5 +175,6 @@ def blueprint():
         rrb.Vertical(rrb.TimeSeriesView(origin="hinges", name="hinge angles (rad)"),
                      rrb.TimeSeriesView(origin="energy", name="energy (J)"),
                      rrb.TimeSeriesView(origin="distance", name="smallest distance d (m)"),
-                     rrb.TextLogView(origin="events", name="collision events")),
+                     rrb.TextLogView(origin="events", name="collision events"),
+                     rrb.TextLogView(origin="monitor", name="recorded monitor")),
         column_shares=[3, 2]), collapse_panels=True)

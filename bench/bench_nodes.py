@@ -166,7 +166,7 @@ def main():
         client.start_goal(contract.DEPLOY, "/dynamics").result()  # the model has reached it
         dynamics_throughput(client, args.repeats)
         procs[1].stop()
-        procs.append(NodeProcess("collision_monitor"))
+        procs.append(NodeProcess("collision_monitor", "max_lag:=0.0"))  # checks every sample
         msgs = monitor_cost()
         monitor_live(client, msgs)
         event_latency(client)

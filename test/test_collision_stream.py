@@ -135,6 +135,39 @@ def test_a_gap_is_counted_and_reported(khz, clean):
     assert clean_stream.gaps == 0 and clean_stream.verdict()[0] == 2
 
 
+def test_skipped_samples_are_counted_never_gaps_and_d_is_an_upper_bound(khz, clean):
+    """The monitor's rule above its capacity, skipping all it may: at most a
+    5 ms span (the scene's sample interval) between checked 1 kHz samples, the
+    first collision found as at 200 Hz, the verdict says how many were
+    skipped, and d is never below the full check's."""
+    s, model, result = khz
+    settings = CollisionSettings.from_scene(s)
+    full, _ = _feed(model, settings, result.t, result.theta, result.omega)
+    stream, first, checked = StreamCheck(model, settings), None, 0
+    for j, t in enumerate(result.t):
+        if stream.skip(t, 0.005):
+            continue
+        checked += 1
+        events = stream.update(t, result.theta[j], result.omega[j])
+        first = first or (events[0] if events else None)
+    assert not StreamCheck(model, settings).skip(0.0, 1.0)  # a deployment's first is checked
+    assert stream.skipped + checked == len(result.t) and stream.gaps == 0
+    assert len(result.t) / 6 <= checked <= len(result.t) / 5 + 2  # 5 or 6 ms apart
+    assert first is not None and set(first.names) == set(FIRST_PAIR)
+    assert first.t == pytest.approx(clean.t, abs=1e-3)
+    level, message, values = stream.verdict()
+    assert level == 2 and values["skipped"] == stream.skipped == len(result.t) - checked
+    d_full, d_skipped = full.check.d, stream.check.d
+    assert d_skipped >= d_full - 1e-12
+    # Before the collision, the same rule gives a WARN verdict that names the skips.
+    early = StreamCheck(model, settings)
+    for j in np.flatnonzero(result.t < 0.3):
+        if not early.skip(result.t[j], 0.005):
+            early.update(result.t[j], result.theta[j], result.omega[j])
+    level, message, values = early.verdict()
+    assert level == 1 and "skipped to keep up" in message and "upper bound" in message
+
+
 def test_approach_speed_on_a_fixed_grid_is_rate_independent(scene):
     """Eq. (7) over 5 ms whatever the rate: 200 Hz and 1 kHz streams agree,
     and on the 200 Hz grid it is Eq. (7) of the samples themselves."""

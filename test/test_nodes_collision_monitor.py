@@ -36,7 +36,7 @@ def deployment():
 @pytest.fixture(scope="module")
 def graph(compiled_nodes):
     model = NodeProcess("array_model", "scene:=paper_4x4")
-    monitor = NodeProcess("collision_monitor")
+    monitor = NodeProcess("collision_monitor", "max_lag:=0.0")  # every sample checked
     client = Client("monitor_test")
     publisher = client.node.create_publisher(JointState, "/joint_states", messages.qos(contract.STREAM))
     events = client.listen(CollisionEvent, "/panel_deploy/collision_events")

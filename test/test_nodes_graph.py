@@ -41,7 +41,7 @@ def test_the_driver_drives_nodes_in_processes_of_their_own(compiled_nodes):
     ns = "/separate"
     procs = [NodeProcess("array_model", "scene:=paper_4x4", namespace=ns),
              NodeProcess("dynamics", "t_end:=0.6", "real_time_factor:=0.0", namespace=ns),
-             NodeProcess("collision_monitor", namespace=ns)]
+             NodeProcess("collision_monitor", "max_lag:=0.0", namespace=ns)]
     client = Client("driver_test")
     driver = load("graph").Driver(threading.Event(), context=client.context, namespace=ns)
     client.executor.add_node(driver)

@@ -39,7 +39,8 @@ def deployment():
 @pytest.fixture(scope="module")
 def graph(compiled_nodes):
     model = NodeProcess("array_model", "scene:=paper_4x4")
-    monitor = NodeProcess("collision_monitor")
+    # Every sample checked however late (the skip rule has a test of its own).
+    monitor = NodeProcess("collision_monitor", "max_lag:=0.0")
     client = Client("monitor_streams_test")
     publisher = client.node.create_publisher(JointState, "/joint_states", messages.qos(contract.STREAM))
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")
@@ -156,6 +157,33 @@ def test_a_stream_without_a_loop_hinge_gives_the_same_verdict(graph, deployment)
     assert abs(float(values(last)["first_collision_t"]) - report.first_collision.t) <= 1e-3
     assert "r2c1-r3c1" in values(last)["solved"]
     assert not statuses(diagnostics, messages.WARN)
+
+
+def test_behind_the_stream_it_skips_the_late_samples_and_says_so(graph, deployment):
+    """A burst with a loop hinge left out (partial sensing, the costly case) and
+    max_lag 1 ms: the monitor falls behind, skips late samples, accounts for
+    every one, still finds the first collision, and its d is no smaller than
+    the full check's (an upper bound); the verdict is never OK."""
+    client, publisher, diagnostics, events, _ = graph
+    t, names, theta, omega, report = deployment
+    set_parameter(client, "max_lag", 0.001)
+    try:
+        new_deployment(client, diagnostics, events)
+        keep = [i for i, name in enumerate(names) if name != "r2c1-r3c1"]
+        for j in range(len(t)):
+            publish(publisher, [names[i] for i in keep], t[j], theta[j, keep], omega[j, keep])
+
+        def accounted():
+            return [s for s in statuses(diagnostics) if "samples" in values(s) and
+                    int(values(s)["samples"]) + int(values(s)["skipped"]) == len(t)]
+        wait_for(accounted, timeout=120, what="every sample checked or skipped")
+        last = values(accounted()[-1])
+        assert int(last["skipped"]) > 0 and accounted()[-1].level == messages.ERROR
+        assert last["first_collision_pair"] == ",".join(report.first_collision.names)
+        assert float(last["d"]) >= report.d - 1e-12
+        assert any("skipped to keep up" in s.message for s in statuses(diagnostics, messages.WARN))
+    finally:
+        set_parameter(client, "max_lag", 0.0)
 
 
 def test_a_hinge_on_no_loop_cannot_be_left_out(graph, deployment):

@@ -28,7 +28,7 @@ def arrays(compiled_nodes):
                   NodeProcess("dynamics", f"t_end:={T_END}", "real_time_factor:=0.0", *extra,
                               namespace=ns),
                   # Sim time from its own array's clock: /clock is remapped to <ns>/clock.
-                  NodeProcess("collision_monitor", "use_sim_time:=true", namespace=ns,
+                  NodeProcess("collision_monitor", "use_sim_time:=true", "max_lag:=0.0", namespace=ns,
                               remaps=[contract.CLOCK_REMAP])]
     client = Client("namespaces_test")
     diagnostics = client.listen(DiagnosticArray, "/diagnostics")

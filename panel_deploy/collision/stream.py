@@ -75,6 +75,19 @@ class StreamCheck:
         Hinges the last sample carried.
     last_theta : ndarray or None
         The tree angles of the last sample checked, rad.
+    skipped : int
+        Samples of the current deployment left unchecked by :meth:`skip`.
+
+    Notes
+    -----
+    Above its capacity a live monitor checks the newest sample and skips the
+    ones that waited too long (:meth:`skip`), but never more than ``span`` s
+    of them in a row: the checked samples stay at most ``span`` plus one
+    interval apart (the scene's own sample interval: what ``simulate``
+    checks on), so the check between them (Hermite motion) finds what a
+    check at that rate finds. ``d`` is then the smallest distance over the
+    checked samples and what was refined between them, an upper bound of the
+    stream's own, and the verdict says how many samples it skipped.
     """
 
     def __init__(self, model: Model, collision: CollisionSettings):
@@ -91,6 +104,8 @@ class StreamCheck:
         self.solved: list = []
         self.measured: list = []
         self.last_theta = None
+        self.skipped = 0
+        self._skipping = False  # the next interval spans skipped samples: not a gap
         self._intervals = deque(maxlen=GAP_WINDOW)
         self._last = None
 
@@ -101,6 +116,18 @@ class StreamCheck:
     def refuse(self, field: str) -> None:
         """Count a message refused for ``field`` (the node's reading errors too)."""
         self.refused[field] = self.refused.get(field, 0) + 1
+
+    def skip(self, t: float, span: float) -> bool:
+        """Leave the sample at stamp ``t`` (s) unchecked, counted in
+        :attr:`skipped`, and return True; or return False for a sample that
+        must be checked: one ``span`` s or more after the last checked, a
+        deployment's first, or one that starts a new one or is out of order
+        (its refusal is :meth:`update`'s to say)."""
+        if self.check is None or not self._last < t < self._last + span:
+            return False
+        self.skipped += 1
+        self._skipping = True
+        return True
 
     def update(self, t: float, theta, omega=None) -> list:
         """Check the sample at stamp ``t`` (s); ``theta``, ``omega`` (rad, rad/s)
@@ -153,10 +180,14 @@ class StreamCheck:
         self.deployments += 1
         self.refused = {}
         self.gaps, self.largest_gap, self.last_gap = 0, 0.0, None
+        self.skipped, self._skipping = 0, False
         self._intervals.clear()
         return events
 
     def _interval(self, dt: float) -> None:
+        if self._skipping:  # the stream had samples here: neither a gap nor its typical interval
+            self._skipping, self.last_gap = False, None
+            return
         typical = self.typical_interval
         self.last_gap = dt if typical is not None and dt > GAP_FACTOR * typical else None
         if self.last_gap is not None:
@@ -196,7 +227,7 @@ class StreamCheck:
                   "distance_now": (c.monitor.min_distance
                                    if math.isfinite(c.monitor.min_distance) else None),
                   "refused": refused,
-                  "gaps": self.gaps, "largest_gap": self.largest_gap,
+                  "gaps": self.gaps, "largest_gap": self.largest_gap, "skipped": self.skipped,
                   "solved": list(self.solved), "measured": list(self.measured)}
         values.update({f"refused_{field}": n for field, n in self.refused.items()})
         if c.collided:
@@ -211,6 +242,10 @@ class StreamCheck:
             faults.append(f"{refused} joint states refused ({worst}: {self.refused[worst]})")
         if self.gaps:
             faults.append(f"{self.gaps} gaps in the stream (longest {self.largest_gap * 1e3:.1f} ms)")
+        if self.skipped:
+            faults.append(f"{self.skipped} of {self.skipped + c.checked} joint states skipped to "
+                          f"keep up (the newest checked); d is over the checked ones, an upper "
+                          f"bound")
         if faults:
             return 1, "no collision seen, but " + "; ".join(faults), values
         return 0, "no collision", values

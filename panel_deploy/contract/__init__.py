@@ -329,7 +329,7 @@ def _pair(text: str):
 #: How each key-value of an event, a verdict or an outcome reads back.
 _PARSERS = {"t": float, "approach_speed": float, "deployment": _integer, "origin": _number, "samples": _integer, "d": _number,
             "d_pair": _pair, "d_time": _number, "distance_now": _number, "refused": _integer,
-            "gaps": _integer, "largest_gap": _number, "solved": lambda s: s.split(",") if s else [],
+            "gaps": _integer, "skipped": _integer, "largest_gap": _number, "solved": lambda s: s.split(",") if s else [],
             "measured": lambda s: s.split(",") if s else [], "expected": _integer,
             "since_last_sample": _number,
             "first_collision_pair": _pair, "first_collision_t": _number,

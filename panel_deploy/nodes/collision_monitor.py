@@ -18,13 +18,22 @@ and ``solved`` hinges, ``expected`` samples, ``since_last_sample`` s); ERROR
 after a collision; four times a second and at the first
 event). A malformed message is skipped and counted; WARNs about it come at
 most once a second per kind, saying how many were held back.
+
+Above its capacity (a joint state that waited over ``max_lag`` s since the
+middleware received it) the monitor skips the late samples and checks the
+newest, but never skips a span longer than the scene's sample interval (5 ms
+for the paper's scene): collisions in a skipped span are still found between
+the checked samples, ``d`` becomes an upper bound, and the verdict (WARN) and
+its ``skipped`` count say so (:meth:`~panel_deploy.collision.StreamCheck.skip`).
 """
 
 from __future__ import annotations
 
 import math
 import re
+import threading
 import time
+from collections import deque
 
 import numpy as np
 
@@ -52,6 +61,9 @@ PARAMETERS = {
     "stamps": ("", "header: a joint state's time is its header.stamp; receipt: the time it "
                    "arrived (drivers that leave stamps unfilled); empty: the scene's "
                    "collision.stamps"),
+    "max_lag": (0.02, "s a joint state may wait in the queue: above it the monitor is behind "
+                      "and skips it, checking the newest (the verdict counts them); 0: check "
+                      "every one however late", (0.0, 10.0)),
     runtime.FRAME_PREFIX: ("", runtime.FRAME_PREFIX_DOC),
 }
 #: s between verdicts on /diagnostics.
@@ -63,7 +75,7 @@ STALL_INTERVALS = 20.0
 #: The scene's collision keys a parameter overrides when it holds no "the scene's" value.
 _OVERRIDES = {"tolerance": lambda v: v >= 0, "noise": lambda v: v >= 0,
               "speed_interval": lambda v: v >= 0, "stamps": bool, "refine": lambda v: True,
-              runtime.FRAME_PREFIX: lambda v: False}
+              runtime.FRAME_PREFIX: lambda v: False, "max_lag": lambda v: False}
 
 
 class CollisionMonitorNode(Node):
@@ -91,11 +103,20 @@ class CollisionMonitorNode(Node):
         self._qos_fault = None     # why joint states cannot arrive at all
         runtime.trigger_service(self, contract.RESET, self._reset)
         self._throttle = Throttle()
+        # Joint states are read as they come and checked by a worker thread of
+        # their own, so that the check never holds up the executor and the
+        # worker always sees the newest sample that has come (the skip rule).
+        self._lock = threading.RLock()     # the stream check and its verdict
+        self._queued = threading.Condition()
+        self._pending = deque()            # read, not yet checked
+        self._closing = False
         self._apply()
         # Wall time, whatever use_sim_time says: a stream that stops (and its /clock
         # with it) must still get the verdict that says so.
         self.create_timer(VERDICT_PERIOD, self._publish_verdict,
                           clock=RosClock(clock_type=ClockType.STEADY_TIME))
+        self._worker = threading.Thread(target=self._check_loop, daemon=True)
+        self._worker.start()
 
     def _collision(self, changes=None) -> tuple:
         """``(settings, receipt)``: the scene's collision settings with the
@@ -120,14 +141,21 @@ class CollisionMonitorNode(Node):
     def _apply(self, params=None):
         """The stamps rule at once; the rest from the next deployment."""
         collision, self._receipt = self._collision()
-        if self.stream is not None:
-            self.stream.collision = collision
+        self._max_lag = self.get_parameter("max_lag").value
+        with self._lock:
+            if self.stream is not None:
+                self.stream.collision = collision
 
     def _on_model(self, msg):
         try:
-            self.scene = scene_from_yaml(msg.data)
+            scene = scene_from_yaml(msg.data)
+            self.scene = scene
             collision, self._receipt = self._collision()
-            self.stream = StreamCheck(build_model(self.scene), collision)
+            stream = StreamCheck(build_model(scene), collision)
+            with self._lock:
+                self.stream = stream
+                # Checked samples never further apart than those simulate checks.
+                self._skip_span = scene.simulation.t_end / (scene.simulation.samples - 1)
         except PanelDeployError as e:
             self._warn("model", f"ignored a model: {e}")
             return
@@ -139,16 +167,51 @@ class CollisionMonitorNode(Node):
             return self._warn("no model", "joint state skipped: no model yet on panel_deploy/model")
         try:
             t, names, position, velocity = messages.read_joint_state(msg, stream.names)
-            if self._receipt:  # when it left the driver, else when it arrived: not when handled
-                t = (info["source_timestamp"] or info["received_timestamp"]) * 1e-9
+        except PanelDeployError as e:
+            return self._refuse(stream, e)
+        if self._receipt:  # when it left the driver, else when it arrived: not when handled
+            t = (info["source_timestamp"] or info["received_timestamp"]) * 1e-9
+        with self._queued:
+            self._pending.append((stream, t, names, position, velocity,
+                                  info["received_timestamp"]))
+            self._queued.notify()
+
+    def _refuse(self, stream, e):
+        with self._lock:
+            stream.refuse(str(e).split(":", 1)[0][:40])
+            # One kind per fault, whatever its values (names, numbers): a flood is throttled.
+            kind = re.sub(r"'[^']*'|\d+(\.\d*)?(e[-+]?\d+)?", "#", str(e))[:80]
+            self._warn(kind, f"joint state skipped: {e}")
+
+    def _check_loop(self):
+        """The worker: every joint state read so far, in order; above capacity
+        (one that waited over ``max_lag`` s since the middleware received it,
+        and a newer one has come) skipped and counted, so the newest is always
+        checked, and never more than the scene's sample interval of them in a row (:meth:`~panel_deploy.collision.StreamCheck.skip`)."""
+        while True:
+            with self._queued:
+                while not self._pending and not self._closing:
+                    self._queued.wait()
+                if self._closing:
+                    return
+                batch = list(self._pending)
+                self._pending.clear()
+            with self._lock:
+                for i, (stream, t, *sample, received) in enumerate(batch):
+                    if stream is not self.stream:
+                        continue  # read against a model that has since been replaced
+                    late = (self._max_lag > 0 and received and i < len(batch) - 1
+                            and (time.time_ns() - received) * 1e-9 > self._max_lag)
+                    if not (late and stream.skip(t, self._skip_span)):
+                        self._check(stream, t, *sample)
+
+    def _check(self, stream, t, names, position, velocity):
+        try:
             theta, omega = stream.coordinates(names, position, velocity)
             deployments = stream.deployments
             found = stream.update(t, theta, omega)
         except PanelDeployError as e:
-            stream.refuse(str(e).split(":", 1)[0][:40])
-            # One kind per fault, whatever its values (names, numbers): a flood is throttled.
-            kind = re.sub(r"'[^']*'|\d+(\.\d*)?(e[-+]?\d+)?", "#", str(e))[:80]
-            return self._warn(kind, f"joint state skipped: {e}")
+            return self._refuse(stream, e)
         self._arrived, self._qos_fault = time.monotonic(), None
         if stream.deployments != deployments:
             self._clear_markers()
@@ -160,13 +223,20 @@ class CollisionMonitorNode(Node):
                               f"located on interpolated motion")
         if found:
             first = found[0] is stream.check.first_events[0]
-            R, p = forward_kinematics(self.stream.model, theta)
+            R, p = forward_kinematics(stream.model, theta)
             for e in found:
                 self.events.publish(messages.collision_event(e, stream.origin, self._frame()))
             self.markers.publish(messages.collision_markers(
-                self.stream.model, found[0], R, p, t, self._frame()))
+                stream.model, found[0], R, p, t, self._frame()))
             if first:  # the verdict turns ERROR now; later events leave it so (timer only)
                 self._publish_verdict()
+
+    def close(self):
+        """Stop the worker (the executor still spins: see runtime.spin)."""
+        with self._queued:
+            self._closing = True
+            self._queued.notify()
+        self._worker.join(timeout=5.0)
 
     def _warn(self, kind, text):
         """A WARN on the log and /diagnostics, at most one a second of each kind."""
@@ -197,8 +267,11 @@ class CollisionMonitorNode(Node):
         self._publish_verdict()
 
     def _publish_verdict(self):
-        if self.stream is None:
-            return
+        with self._lock:
+            if self.stream is not None:
+                self._send_verdict()
+
+    def _send_verdict(self):
         level, text, values = self.stream.verdict()
         coverage = self._coverage()
         if coverage is not None and level < 2:
@@ -224,9 +297,10 @@ class CollisionMonitorNode(Node):
         if silent < max(STALL_S, STALL_INTERVALS * (stream.typical_interval or 0.0)):
             return None
         checked = stream.check.checked
-        if self._expected is not None:
-            return None if checked >= self._expected else (
-                f"checked {checked} of the {self._expected} joint states the deployment sent")
+        if self._expected is not None:  # skipped ones are accounted for (and said) by the verdict
+            return None if checked + stream.skipped >= self._expected else (
+                f"checked {checked} (skipped {stream.skipped}) of the {self._expected} joint "
+                f"states the deployment sent")
         flat = self.scene.simulation.flat_tolerance
         if stream.last_theta is not None and np.abs(stream.last_theta).max() <= flat:
             return None  # deployed: a stream that stops now has ended
@@ -245,7 +319,10 @@ class CollisionMonitorNode(Node):
         if self.stream is None:
             response.success, response.message = False, "no model yet"
             return response
-        self.stream.reset()
+        with self._queued:  # read before the reset: not the next deployment's
+            self._pending.clear()
+        with self._lock:
+            self.stream.reset()
         self._qos_fault = self._expected = self._arrived = None
         self._clear_markers()
         response.success, response.message = True, "the next joint state starts a new deployment"

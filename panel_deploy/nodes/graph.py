@@ -238,7 +238,9 @@ def _run(scene_file, optimise, real_time_factor, rate_hz, as_json, record, names
                  DynamicsNode(parameter_overrides=[
                      Parameter("real_time_factor", value=float(real_time_factor)),
                      Parameter("rate_hz", value=float(rate_hz))], **ns),
-                 CollisionMonitorNode(**ns), OptimiserNode(**ns))
+                 # A simulated stream has no deadline: every sample is checked.
+                 CollisionMonitorNode(parameter_overrides=[Parameter("max_lag", value=0.0)], **ns),
+                 OptimiserNode(**ns))
         driver = Driver(interrupt, recorder, **ns)
         failure = []
         interrupted = threading.Event()

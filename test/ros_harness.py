@@ -37,19 +37,26 @@ def wait_for(condition, timeout=60.0, what="condition"):
         time.sleep(0.02)
 
 
-def checked_samples(diagnostics, count, idle=5.0, status="/collision_monitor") -> int:
-    """The samples the monitor's verdicts on ``diagnostics`` (a :meth:`Client.listen` list)
-    say it checked, once that reaches ``count`` or has not moved for ``idle`` s."""
-    def checked():
-        return max([int(kv.value) for d in list(diagnostics) for s in d.status for kv in s.values
-                    if kv.key == "samples" and s.name == status] or [0])
+def checked_samples(diagnostics, count, idle=5.0, status="/collision_monitor") -> tuple:
+    """``(checked, skipped)``: the samples the monitor's verdicts on ``diagnostics`` (a
+    :meth:`Client.listen` list) say it checked and skipped, once they account for
+    ``count`` or have not moved for ``idle`` s."""
+    def seen():
+        best = (0, 0)
+        for d in list(diagnostics):
+            for s in d.status:
+                v = {kv.key: kv.value for kv in s.values} if s.name == status else {}
+                if v.get("samples"):
+                    best = max(best, (int(v["samples"]), int(v.get("skipped") or 0)),
+                               key=sum)
+        return best
 
-    seen, still = -1, time.monotonic()
-    while checked() < count and time.monotonic() - still < idle:
-        if checked() != seen:
-            seen, still = checked(), time.monotonic()
+    last, still = None, time.monotonic()
+    while sum(seen()) < count and time.monotonic() - still < idle:
+        if seen() != last:
+            last, still = seen(), time.monotonic()
         time.sleep(0.02)
-    return checked()
+    return seen()
 
 
 class Client:

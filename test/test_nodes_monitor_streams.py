@@ -186,6 +186,24 @@ def test_behind_the_stream_it_skips_the_late_samples_and_says_so(graph, deployme
         set_parameter(client, "max_lag", 0.0)
 
 
+def test_a_monitor_that_joins_late_reports_the_stream_s_own_time(graph, deployment):
+    """Its first sample is the deployment's at 0.1 s: the event is stamped with the
+    collision's time in the stream's clock (0.416 s), t counts from what it saw."""
+    client, publisher, diagnostics, events, _ = graph
+    t, names, theta, omega, report = deployment
+    new_deployment(client, diagnostics, events)
+    start = int(np.searchsorted(t, 0.1))
+    for j in range(start, len(t)):
+        publish(publisher, names, t[j], theta[j], omega[j])
+    wait_for(lambda: events, what="the collision")
+    first = events[0]
+    assert (first.body_a, first.body_b) == report.first_collision.names
+    assert messages.seconds(first.header.stamp) == pytest.approx(report.first_collision.t, abs=1e-3)
+    assert first.t == pytest.approx(report.first_collision.t - t[start], abs=1e-3)
+    last = verdict_after(diagnostics, len(t) - start)
+    assert float(values(last)["origin"]) == pytest.approx(t[start])
+
+
 def test_a_hinge_on_no_loop_cannot_be_left_out(graph, deployment):
     client, publisher, diagnostics, events, _ = graph
     t, names, theta, _, _ = deployment

@@ -79,7 +79,7 @@ class LoopSolver:
         self._guess = np.asarray(model.theta_stowed, dtype=float)[self.missing]
         self._cut_target = np.zeros(len(self._cut_rows))
         self.last_gap = 0.0
-        self._J = None
+        self._pinv = None  # pseudo-inverse of the last solution's Jacobian: the next chord
         self._check_determined()
 
     def _check_determined(self) -> None:
@@ -166,14 +166,17 @@ class LoopSolver:
         # enough for the small steps between samples. A jump (a new deployment,
         # a gap) gets Newton's method from the stowed angles instead.
         stowed = np.asarray(self.model.theta_stowed, dtype=float)[self.missing]
-        for x, chord in ((self._guess.copy(), self._J), (stowed, None)):
+        # Least squares by the pseudo-inverse of each Jacobian, computed once: the
+        # chord steps and the rates are then products (lstsq per step cost more
+        # than the residuals).
+        for x, chord in ((self._guess.copy(), self._pinv), (stowed, None)):
             theta[self.missing] = x
-            J = chord
+            pinv = chord
             for _ in range(MAX_STEPS):
-                if chord is None or J is None:
-                    J = self._jacobian(theta, cut_target)[0]
+                if chord is None or pinv is None:
+                    pinv = _pinv(self._jacobian(theta, cut_target)[0])
                 with np.errstate(all="ignore"):
-                    step = np.linalg.lstsq(J, -self._residual(theta, cut_target), rcond=None)[0]
+                    step = -(pinv @ self._residual(theta, cut_target))
                 x += step
                 theta[self.missing] = x
                 if not np.abs(step).max() > STEP_TOL:
@@ -187,7 +190,7 @@ class LoopSolver:
             raise TrajectoryError(f"position: the carried angles leave the loop open by "
                                   f"{gap * 1e3:.3g} mm; cannot solve for "
                                   f"{self.tree_names[self.missing[0]]!r}")
-        self._J, self._guess, self.last_gap = J, x, gap
+        self._pinv, self._guess, self.last_gap = _pinv(J), x, gap
         if omega_known is None or (self.cut_names and cut_omega is None):
             return theta, None
         omega = np.zeros(n)
@@ -195,8 +198,16 @@ class LoopSolver:
         # J_x omega_x = -(d r / d theta_known) omega_known: one directional difference.
         cut_rate = np.asarray(cut_omega if cut_omega is not None else (), dtype=float)
         moved = self._residual(theta + FD_STEP * omega, cut_target + FD_STEP * cut_rate)
-        omega[self.missing] = np.linalg.lstsq(J, -(moved - r0) / FD_STEP, rcond=None)[0]
+        omega[self.missing] = -(self._pinv @ ((moved - r0) / FD_STEP))
         return theta, omega
+
+
+def _pinv(J) -> np.ndarray:
+    """Moore-Penrose pseudo-inverse of ``J`` (NaN where ``J`` is not finite: the
+    solve then falls back or fails on its own terms)."""
+    if not np.all(np.isfinite(J)):
+        return np.full(J.shape[::-1], np.nan)
+    return np.linalg.pinv(J)
 
 
 class TreeCoordinates:

@@ -21,6 +21,7 @@ such a stream into the samples a :class:`~.check.TrajectoryCheck` takes:
 from __future__ import annotations
 
 import math
+import statistics
 from collections import deque
 
 import numpy as np
@@ -204,7 +205,9 @@ class StreamCheck:
     @property
     def typical_interval(self) -> float | None:
         """Median of the recent intervals between samples, s (None before there are enough)."""
-        return float(np.median(self._intervals)) if len(self._intervals) == GAP_WINDOW else None
+        # statistics, not numpy: 16 floats, at every sample (numpy's median costs ~30x more)
+        return float(statistics.median(self._intervals)) if len(self._intervals) == GAP_WINDOW \
+            else None
 
     def verdict(self) -> tuple:
         """``(level, message, values)``: level 0 no collision so far, 1 a

@@ -169,6 +169,43 @@ def test_sigterm_during_optimise_saves_the_best_so_far(tmp_path):
     assert k.shape == (12,) and np.all(k > 0)
 
 
+def test_sigterm_as_timeout_sends_it_keeps_the_feasible_k_found(tmp_path):
+    # Issue 33: timeout(1) signals the command and then its whole process group, so
+    # the workers and, a moment later, the main process again. Once a feasible K
+    # has come back, the file must hold it, whichever moment the signals hit: the
+    # workers ignore them (the pool stays whole) and a repeated signal does not
+    # cut the saving short. Four moments after the first feasible evaluation.
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    import yaml
+
+    for i, delay in enumerate((0.0, 0.05, 0.2, 0.5)):
+        out = tmp_path / f"best{i}.yaml"
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "panel_deploy.cli", "optimise", PAPER, "--workers", "2",
+             "--set", "optimisation.damping_ratio_bounds=[0.043,0.3]", "--out", str(out)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        try:
+            line = ""
+            while "flat yes" not in line or "collision no" not in line:
+                line = proc.stderr.readline()
+                assert line, "the optimiser ended before a feasible K"
+            os.kill(proc.pid, signal.SIGTERM)
+            time.sleep(delay)
+            os.killpg(proc.pid, signal.SIGTERM)
+            _, err = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+        assert proc.returncode == 130, (delay, err)
+        data = yaml.safe_load(out.read_text())
+        assert data["status"] == 3 and data["success"] is True, (delay, data["message"])
+        assert data["collision"] is None and data["reached_flat"] is True
+
+
 def _frames(*modules):
     """A fake stack: the first module's frame on top, called by the next, and so on
     (``name:<string>``: code ``exec`` runs from a string in module ``name``)."""
@@ -215,6 +252,9 @@ def test_a_deferred_interrupt_is_raised_once_back_in_our_code():
         with pytest.raises(KeyboardInterrupt):
             time.sleep(2.0)  # the SIGALRM retry finds this test's frame
         assert interrupts.raised
+        # a repeat (timeout(1) signals the command, then its process group)
+        # must not cut short what the first one's handling does
+        assert interrupts(signal.SIGTERM, _frames("x")) is None
         interrupts.over = True  # the command has ended: nothing left to stop
         assert interrupts(signal.SIGINT, _frames("x")) is None
     finally:

@@ -209,8 +209,22 @@ def optimise(model, scene, *, k0=None, groups=None, workers=None, dask_address=N
     try:
         ended = _search(run, opt.method, opt.restarts, rng)
     finally:
-        backend.close()
+        closed_interrupted = _close(backend)
+    ended.interrupted |= closed_interrupted
     return _result(run, opt.method, ended, time.perf_counter() - start)
+
+
+def _close(backend) -> bool:
+    """Close ``backend`` even when Ctrl-C or SIGTERM comes meanwhile (its
+    workers must not outlive the search, and the evaluations made are still a
+    result); True if one came."""
+    interrupted = False
+    while True:
+        try:
+            backend.close()
+            return interrupted
+        except KeyboardInterrupt:
+            interrupted = True
 
 
 def search_scene(scene):

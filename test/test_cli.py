@@ -33,6 +33,7 @@ def test_fold_scene_reports_the_paper_design(capsys, tmp_path):
     code, out, _ = run(capsys, "fold", "--scene", PAPER, "--json", "--plot", str(tmp_path / "d.png"))
     data = json.loads(out)
     assert code == 0 and data["dof_cells"] == 10 and data["dof_bodies"] == 6
+    assert (data["mobility_cells"], data["mobility_bodies"]) == (10, 6)
     assert (tmp_path / "d.png").stat().st_size > 10_000
 
 

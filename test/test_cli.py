@@ -448,9 +448,11 @@ def test_serve_on_a_busy_port_says_so_before_reading(capsys, no_work):
 
 def test_duplicate_scene_sections_are_refused(capsys, tmp_path, no_work):
     scene = tmp_path / "dup.yaml"
-    scene.write_text(Path(PAPER).read_text() + "\nsimulation: {method: RK45}\n")
+    text = Path(PAPER).read_text()
+    scene.write_text(text + "\nsimulation: {method: RK45}\n")
     line = one_line_error(capsys, ["simulate", str(scene)])
-    assert "dup.yaml: malformed YAML at line 125" in line
+    # the appended section's line: after the scene's lines and the blank one
+    assert f"dup.yaml: malformed YAML at line {text.count(chr(10)) + 2}" in line
     assert "duplicate key 'simulation'" in line
 
 

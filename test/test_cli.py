@@ -411,6 +411,9 @@ def test_an_output_that_is_an_input_is_refused(capsys, tmp_path, no_work, argv, 
     # issue 26: refused after the whole run before, naming collision.margin (not a scene key)
     ("collision.tolerance=0.05", "--set collision.tolerance: expected a number <= 0.02, got 0.05 "
                                  "(limit: the collision check's broad phase"),
+    # issue 33: tolerance 0 took the stowed package, whose panels touch, for a collision
+    ("collision.tolerance=0", "--set collision.tolerance: expected a number >= 1e-09, got 0 "
+                              "(limit: panels touching in the stowed stacks are 0 apart"),
 ])
 def test_absurd_values_fail_at_once_naming_the_set_item(capsys, no_work, item, expected):
     line = one_line_error(capsys, ["simulate", PAPER, "--set", item])

@@ -20,6 +20,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from ..errors import DesignError
 from .design import Cell, FoldDesign
 from .kutzbach import body_joints
 
@@ -81,7 +82,11 @@ class _Loops:
     hinge per independent loop."""
 
     def __init__(self, n_bodies: int, joints: Sequence[tuple[int, int]], twists, ground: int):
-        self.twists = list(twists)
+        bodies = range(n_bodies)
+        if ground not in bodies or any(a not in bodies or b not in bodies for a, b in joints):
+            raise DesignError(f"joints: expected pairs of body indices 0..{n_bodies - 1} and a "
+                              f"ground among them, got ground {ground!r} and joints {joints!r}")
+        self.twists = [np.asarray(t, dtype=float) for t in twists]
         self.parent = {ground: None}  # body -> (joint, parent body)
         order, cuts = [ground], []
         adjacent = {b: [] for b in range(n_bodies)}
@@ -126,8 +131,9 @@ class _Loops:
             rows = slice(6 * row, 6 * row + 6)
             E = g[a] @ _exp(self.twists[e], theta[e]) @ np.linalg.inv(g[b])
             R = E[:3, :3]
-            res[rows] = np.concatenate([E[:3, 3], [R[2, 1] - R[1, 2], R[0, 2] - R[2, 0],
-                                                   R[1, 0] - R[0, 1]]]) / np.array([1, 1, 1, 2, 2, 2])
+            # a small rotation's vector is half the skew part of its matrix
+            skew = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+            res[rows] = np.concatenate([E[:3, 3], skew])
             J[rows, e] += _adjoint(g[a], self.twists[e])
             for sign, body in ((1.0, a), (-1.0, b)):
                 for j, up in self._path(body):
@@ -182,7 +188,7 @@ def loop_mobility(n_bodies: int, joints: Sequence[tuple[int, int]], twists: Iter
     ground : int
         The body held fixed.
     seed : int
-        Of the random starts.
+        Of the random walks.
 
     Returns
     -------
@@ -191,9 +197,21 @@ def loop_mobility(n_bodies: int, joints: Sequence[tuple[int, int]], twists: Iter
         closed configuration near the reference one: the largest over
         :data:`WALKS` random walks (the dimension of the largest branch);
         None if no walk could keep the loops closed.
+
+    Raises
+    ------
+    DesignError
+        If a joint names no body, the twists do not match the joints, or a
+        body is not joined to the ground.
     """
     loops = _Loops(n_bodies, joints, twists, ground)
     n = len(loops.twists)
+    if n != len(joints) or any(np.shape(t) != (6,) for t in loops.twists):
+        raise DesignError(f"twists: expected one (6,) twist per joint ({len(joints)}), got "
+                          f"{n} of shapes {sorted({np.shape(t) for t in loops.twists})}")
+    if len(loops.order) != n_bodies:
+        raise DesignError(f"joints: {n_bodies - len(loops.order)} of the {n_bodies} bodies "
+                          f"are not joined to the ground body {ground}")
     if not loops.cuts:
         return n  # a tree: nothing constrains the hinges
     rng = np.random.default_rng(seed)

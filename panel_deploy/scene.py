@@ -47,6 +47,16 @@ _WHY_DENSITY = "lighter than any solid (aerogels: 0.16 kg/m^3 and up)"
 #: a pair farther apart than this is only bounded, never computed, so an
 #: interference tolerance above it could not be told from a miss.
 COLLISION_MARGIN = 0.02
+#: Smallest ``collision.tolerance``, m. Panels touching by design (the stowed
+#: stacks, slit neighbours when flat) are 0 apart, and a collision is
+#: interference deeper than the tolerance: at 0 the package itself collides the
+#: moment it moves (paper scene: r4c1 - r4c4 at 6e-5 s). Distances are exact to
+#: 1e-10 m (``collision.geometry.CERTIFY_TOL``), so the tolerance must stand
+#: clear of that; above it, what counts is the user's choice (at 1e-9 .. 1e-6 m
+#: the stowed neighbours' presses through the compliant loop count, within 17 ms).
+MIN_COLLISION_TOLERANCE = 1e-9
+_WHY_TOLERANCE = ("panels touching in the stowed stacks are 0 apart, so a smaller tolerance "
+                  "takes the package for a collision")
 
 
 # --- field parsers: each takes (value, path) and returns the parsed value or raises ---
@@ -188,6 +198,25 @@ def optional(parser):
     return parse
 
 
+def check_collision_tolerance(v, path):
+    """``v`` if it is at least :data:`MIN_COLLISION_TOLERANCE`, else the one
+    error naming ``path`` (the scene key, or the node parameter)."""
+    if not v >= MIN_COLLISION_TOLERANCE:
+        got = f"{v:g}" if isinstance(v, float) else shown(v)
+        raise SceneError(path, f"expected a number >= {MIN_COLLISION_TOLERANCE:g}, got {got} "
+                               f"(limit: {_WHY_TOLERANCE})")
+    return v
+
+
+def collision_tolerance(v, path):
+    v = number(0.0, COLLISION_MARGIN, why=f"the collision check's broad phase computes pairs "
+                                          f"only within {COLLISION_MARGIN:g} m")(v, path)
+    return check_collision_tolerance(v, path)
+
+
+collision_tolerance.describe = f"number >= {MIN_COLLISION_TOLERANCE:g}, <= {COLLISION_MARGIN:g}"
+
+
 def hinge_stiffness_map(v, path):
     if not isinstance(v, dict):
         raise SceneError(path, f"expected a mapping hinge name -> stiffness, got {shown(v)}")
@@ -323,9 +352,7 @@ class SimulationSection:
 
 @dataclass(frozen=True)
 class CollisionSection:
-    tolerance: float = spec(1.0e-4, number(0.0, COLLISION_MARGIN, why="the collision check's "
-                                            f"broad phase computes pairs only within "
-                                            f"{COLLISION_MARGIN:g} m"), "m",
+    tolerance: float = spec(1.0e-4, collision_tolerance, "m",
                             "interference depth beyond which touching panels count as colliding")
     refine: bool = spec(True, boolean, "", "refine between samples so that no collision is missed")
     noise: float = spec(0.0, number(0.0, 0.1, why="encoders that noisy locate nothing"), "rad",

@@ -7,6 +7,7 @@ this module only puts them together for the CLI, the nodes and recordings.
 from __future__ import annotations
 
 from .dynamics import dynamics_summary
+from .dynamics.result import ENERGY_LIMIT
 from .model import FLAT_TOLERANCE
 
 
@@ -60,17 +61,11 @@ def deployment_text(s: dict) -> str:
     return "\n".join(lines)
 
 
-#: Relative energy balance error above which the summary warns that the run
-#: is inaccurate (a deployment that loses or gains this much energy to the
-#: integrator is not an answer to trust: tighten simulation.rtol).
-BALANCE_WARNING = 0.01
-
-
 def _balance_text(error) -> str:
     if error is None:
         return "energy balance error not meaningful (no energy at the start, or non-finite)"
     text = f"energy balance error {error:.2e} (relative)"
-    if error > BALANCE_WARNING:
-        text += (f" -- LARGE (above {BALANCE_WARNING:g}): the integration is inaccurate, "
+    if error > ENERGY_LIMIT:  # the run failed for it (Status.ENERGY_DRIFT)
+        text += (f" -- LARGE (above {ENERGY_LIMIT:g}): the integration is inaccurate, "
                  "tighten simulation.rtol")
     return text

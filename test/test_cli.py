@@ -33,6 +33,7 @@ def test_fold_scene_reports_the_paper_design(capsys, tmp_path):
     code, out, _ = run(capsys, "fold", "--scene", PAPER, "--json", "--plot", str(tmp_path / "d.png"))
     data = json.loads(out)
     assert code == 0 and data["dof_cells"] == 10 and data["dof_bodies"] == 6
+    assert (data["mobility_cells"], data["mobility_bodies"]) == (10, 6)
     assert (tmp_path / "d.png").stat().st_size > 10_000
 
 
@@ -169,6 +170,43 @@ def test_sigterm_during_optimise_saves_the_best_so_far(tmp_path):
     assert k.shape == (12,) and np.all(k > 0)
 
 
+def test_sigterm_as_timeout_sends_it_keeps_the_feasible_k_found(tmp_path):
+    # Issue 33: timeout(1) signals the command and then its whole process group, so
+    # the workers and, a moment later, the main process again. Once a feasible K
+    # has come back, the file must hold it, whichever moment the signals hit: the
+    # workers ignore them (the pool stays whole) and a repeated signal does not
+    # cut the saving short. Four moments after the first feasible evaluation.
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    import yaml
+
+    for i, delay in enumerate((0.0, 0.05, 0.2, 0.5)):
+        out = tmp_path / f"best{i}.yaml"
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "panel_deploy.cli", "optimise", PAPER, "--workers", "2",
+             "--set", "optimisation.damping_ratio_bounds=[0.043,0.3]", "--out", str(out)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        try:
+            line = ""
+            while "flat yes" not in line or "collision no" not in line:
+                line = proc.stderr.readline()
+                assert line, "the optimiser ended before a feasible K"
+            os.kill(proc.pid, signal.SIGTERM)
+            time.sleep(delay)
+            os.killpg(proc.pid, signal.SIGTERM)
+            _, err = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+        assert proc.returncode == 130, (delay, err)
+        data = yaml.safe_load(out.read_text())
+        assert data["status"] == 3 and data["success"] is True, (delay, data["message"])
+        assert data["collision"] is None and data["reached_flat"] is True
+
+
 def _frames(*modules):
     """A fake stack: the first module's frame on top, called by the next, and so on
     (``name:<string>``: code ``exec`` runs from a string in module ``name``)."""
@@ -215,6 +253,9 @@ def test_a_deferred_interrupt_is_raised_once_back_in_our_code():
         with pytest.raises(KeyboardInterrupt):
             time.sleep(2.0)  # the SIGALRM retry finds this test's frame
         assert interrupts.raised
+        # a repeat (timeout(1) signals the command, then its process group)
+        # must not cut short what the first one's handling does
+        assert interrupts(signal.SIGTERM, _frames("x")) is None
         interrupts.over = True  # the command has ended: nothing left to stop
         assert interrupts(signal.SIGINT, _frames("x")) is None
     finally:
@@ -370,6 +411,9 @@ def test_an_output_that_is_an_input_is_refused(capsys, tmp_path, no_work, argv, 
     # issue 26: refused after the whole run before, naming collision.margin (not a scene key)
     ("collision.tolerance=0.05", "--set collision.tolerance: expected a number <= 0.02, got 0.05 "
                                  "(limit: the collision check's broad phase"),
+    # issue 33: tolerance 0 took the stowed package, whose panels touch, for a collision
+    ("collision.tolerance=0", "--set collision.tolerance: expected a number >= 1e-09, got 0 "
+                              "(limit: panels touching in the stowed stacks are 0 apart"),
 ])
 def test_absurd_values_fail_at_once_naming_the_set_item(capsys, no_work, item, expected):
     line = one_line_error(capsys, ["simulate", PAPER, "--set", item])
@@ -407,9 +451,11 @@ def test_serve_on_a_busy_port_says_so_before_reading(capsys, no_work):
 
 def test_duplicate_scene_sections_are_refused(capsys, tmp_path, no_work):
     scene = tmp_path / "dup.yaml"
-    scene.write_text(Path(PAPER).read_text() + "\nsimulation: {method: RK45}\n")
+    text = Path(PAPER).read_text()
+    scene.write_text(text + "\nsimulation: {method: RK45}\n")
     line = one_line_error(capsys, ["simulate", str(scene)])
-    assert "dup.yaml: malformed YAML at line 125" in line
+    # the appended section's line: after the scene's lines and the blank one
+    assert f"dup.yaml: malformed YAML at line {text.count(chr(10)) + 2}" in line
     assert "duplicate key 'simulation'" in line
 
 

@@ -206,6 +206,17 @@ def test_noise_blind_check_raises_false_alarms(khz, clean):
     assert first is not None and first.t < clean.t - 0.05
 
 
+def test_a_tolerance_that_takes_touching_panels_for_colliding_is_refused():
+    # issue 33: at tolerance 0 the stowed stacks, whose panels touch (distance 0),
+    # collided the moment they moved; the scene key and the library refuse it alike
+    from panel_deploy.errors import SceneError
+    from panel_deploy.scene import MIN_COLLISION_TOLERANCE
+    for bad in (0.0, -1e-4, 1e-12, math.nan):
+        with pytest.raises(SceneError, match="collision.tolerance: expected a number >= 1e-09"):
+            CollisionSettings(tolerance=bad)
+    assert CollisionSettings(tolerance=MIN_COLLISION_TOLERANCE).tolerance == 1e-9
+
+
 def test_noise_setting_is_checked():
     with pytest.raises(Exception, match="collision.noise"):
         CollisionSettings(noise=-1e-3)

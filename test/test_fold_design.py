@@ -6,7 +6,10 @@ import pytest
 
 from panel_deploy.cli import main
 from panel_deploy.errors import DesignError
-from panel_deploy.fold import assembly_dof, design, designs, kutzbach_dof
+import numpy as np
+
+from panel_deploy.fold import (assembly_dof, design, designs, jacobian_mobility,
+                              kutzbach_dof, loop_mobility)
 from panel_deploy.fold.report import design_dict, design_text
 
 PAPER = [(1, 2), (1, 1), (2, 1), (3, 1), (4, 1), (4, 2), (3, 2), (2, 2),
@@ -31,6 +34,46 @@ def test_paper_merges_and_dof():
     assert d.refused == ()
     # L4-L3 and L3-L2 are two collinear segments each, counted once.
     assert assembly_dof(d.bodies, d.hinges) == 6
+
+
+def _twist(axis, point):
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    return np.concatenate([-np.cross(axis, point), axis])
+
+
+def test_loop_mobility_of_linkages_of_known_mobility():
+    rng = np.random.default_rng(3)
+    ring = [(0, 1), (1, 2), (2, 3), (3, 0)]
+    # planar four-bar (parallel axes): 1, where Kutzbach counts -2
+    planar = [_twist([0, 0, 1], [*rng.normal(size=2), 0.0]) for _ in range(4)]
+    assert loop_mobility(4, ring, planar) == 1 and kutzbach_dof(4, 4) == -2
+    # spherical four-bar (axes through one point): 1
+    assert loop_mobility(4, ring, [_twist(rng.normal(size=3), [0, 0, 0]) for _ in range(4)]) == 1
+    # generic spatial loops: rigid up to 6 hinges, then n - 6, as Kutzbach says
+    for n in (4, 6, 7, 8):
+        loop = [(i, (i + 1) % n) for i in range(n)]
+        twists = [_twist(rng.normal(size=3), rng.normal(size=3)) for _ in range(n)]
+        assert loop_mobility(n, loop, twists) == max(0, kutzbach_dof(n, n))
+    # an open chain: every hinge free
+    assert loop_mobility(3, [(0, 1), (1, 2)], planar[:2]) == 2
+
+
+def test_jacobian_mobility_beside_kutzbach():
+    # 2 x 2 cells: one loop of four hinges on two lines; Kutzbach counts -2, yet the
+    # array folds about either line, one at a time: mobility 1
+    d = design(2, 2, 0)
+    assert (d.dof_cells, d.dof_bodies) == (-2, 1)
+    assert jacobian_mobility(d) == (1, 1)
+    text = design_text(d)
+    assert "Kutzbach DoF -2 (cells) -> 1 (bodies)" in text
+    assert "mobility from the loop-closure Jacobian's rank: 1 (cells) -> 1 (bodies)" in text
+    js = design_dict(d)
+    assert (js["mobility_cells"], js["mobility_bodies"]) == (1, 1)
+    # the paper's design: a generic loop of 10 bodies and a chain of 2, as Kutzbach says
+    assert jacobian_mobility(design(4, 4, PAPER)) == (10, 6)
+    # a design that does not pack has no hinge facets: no rank
+    unpacked = next(x for _, x in designs(4, 6) if x.stowed is None)
+    assert jacobian_mobility(unpacked) is None and design_dict(unpacked)["mobility_cells"] is None
 
 
 def test_merge_none_and_explicit():

@@ -95,7 +95,7 @@ def test_mcap_reader_summary_counts_and_chunks(recorded):
     assert {"scene", "model", "integrator", "run", "outcome", "rosbag2"} <= set(meta)
     outcome = {k: json.loads(v) for k, v in meta["outcome"].items() if k != "message"}
     assert outcome["first_collision_pair"] == ["r1c2+r1c3", "r2c2+r2c3"]
-    assert outcome["time_to_flat"] == 1.575 and outcome["collided"] is True
+    assert outcome["time_to_flat"] == 1.645 and outcome["collided"] is True
     integrator = {k: json.loads(v) for k, v in meta["integrator"].items() if k != "method"}
     assert integrator["rtol"] == scene.simulation.rtol and integrator["rate_hz"] == 200.0
     assert json.loads(meta["model"]["stiffness"]) == [h.k for h in model.hinges]

@@ -19,7 +19,7 @@ from panel_deploy.cli import main
 
 CLI = str(Path(sys.executable).parent / "panel-deploy")
 #: rad: the re-run is the same integration with the same settings; this is far
-#: below what the integrator's own tolerance would allow (rtol 1e-4).
+#: below what the integrator's own tolerance would allow (the scene's rtol).
 SAME = 1e-9
 
 

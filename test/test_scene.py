@@ -81,6 +81,8 @@ def test_defaults_and_density():
                          "expected >= 0.1 (limit: lighter than any solid"),
     ("collision.tolerance", 0.05, "collision.tolerance: expected a number <= 0.02, got 0.05 "
                                   "(limit: the collision check's broad phase"),
+    ("collision.tolerance", 0, "collision.tolerance: expected a number >= 1e-09, got 0 "
+                               "(limit: panels touching in the stowed stacks are 0 apart"),
     ("gravity", [0, -9.81], "gravity: expected a list of 3 numbers"),
     ("optimisation.bounds", [0.2, 0.001], "optimisation.bounds: lower bound 0.2 is above"),
     ("optimisation.k0", 0.5, "optimisation.k0: 0.5 is outside bounds"),

@@ -53,3 +53,16 @@ def test_a_failed_runs_collision_is_not_passed_off_as_a_result():
     assert deployment_text(s).splitlines()[-1] == ("no collision; smallest distance d = 0.05 m "
                                                    "(up to the failure: not a result)")
     assert "not a result" not in deployment_text(summary(None, 0.0012))
+
+
+def test_a_run_that_does_not_keep_its_energy_fails(capsys):
+    # issue 33: every damper at 0 at rtol 1e-4 exited 0 "ok" with a 26 % energy
+    # balance error; now the run fails there, exit 1, saying why in its first line
+    from panel_deploy.cli import main
+    undamped = ["--set", "hinges.damping_ratio=0", "--set", "contact.c_s=0",
+                "--set", "closure.c_M=0", "--set", "closure.c_N=0"]
+    code = main(["simulate", "paper_4x4", "--t-end", "0.3", "--set", "simulation.rtol=1e-4",
+                 "--set", "simulation.atol=1e-6", *undamped])
+    first = capsys.readouterr().out.splitlines()[0]
+    assert code == 1
+    assert first.startswith("FAILED: energy balance error ") and "above 0.01 at t = " in first

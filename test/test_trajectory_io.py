@@ -24,9 +24,11 @@ from panel_deploy.trajectory_io import COLUMNS, FORMAT_VERSION, UNITS, load_traj
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "formats.md"
 V2 = Path(__file__).resolve().parent / "data" / "trajectory_v2.npz"
-#: The stored run of ``V2``: written by the format-2 code with these arguments.
+#: The stored run of ``V2``: written by the format-2 code with these arguments
+#: (rtol and atol: the scene's then).
 V2_ARGS = ["simulate", "paper_4x4", "--set", "simulation.t_end=0.5", "--set",
-           "simulation.samples=11", "--set", "hinges.overrides={r1c1-r2c1: 0.2}"]
+           "simulation.samples=11", "--set", "hinges.overrides={r1c1-r2c1: 0.2}",
+           "--set", "simulation.rtol=1e-4", "--set", "simulation.atol=1e-6"]
 
 
 @pytest.fixture(scope="module")

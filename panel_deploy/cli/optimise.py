@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import replace
+from functools import partial
 
 from ..build import build_model
 from ..errors import SceneError
@@ -47,10 +49,14 @@ def optimise_command(args) -> int:
     return code
 
 
+def _option(args, name, default=None):
+    """``args.name``, or ``default`` for a namespace without it (the tests pass partial ones)."""
+    return getattr(args, name, default)
+
+
 def optimise_scene(args, scene) -> int:
     """:func:`optimise_command` on a loaded ``scene``, without the recording."""
-    def arg(name, default=None):
-        return getattr(args, name, default)
+    arg = partial(_option, args)
 
     model = build_model(scene)
     quiet = arg("quiet", False)
@@ -67,13 +73,35 @@ def optimise_scene(args, scene) -> int:
                           k0=load_stiffness(arg("start"), model) if arg("start") else None)
     extra = {}
     if result.status == 3:
-        # Ctrl-C again would lose the file: save what there is, skip the checks.
-        if arg("out"):
-            save_result(result, arg("out"), scene.name, extra)
-            print(f"{result.message} -> {arg('out')}", file=sys.stderr)
-        else:
-            print(dump_result(result, scene.name, extra), end="")
-        return 130
+        return save_interrupted(result, arg("out"), scene.name, extra)
+    try:
+        return check_and_write(args, model, scene, result, extra)
+    except KeyboardInterrupt:
+        # The search's K stands whatever check the signal cut short: saved
+        # with the checks done so far, as an interrupted result.
+        result = replace(result, status=3, message=(
+            f"interrupted during the checks after the search ({result.message})"))
+        return save_interrupted(result, arg("out"), scene.name, extra)
+
+
+def save_interrupted(result, out, scene_name, extra) -> int:
+    """Write an interrupted ``result`` (to ``out``, or stdout) without more
+    checks, which a further wait would risk; exit code 130."""
+    if out:
+        save_result(result, out, scene_name, extra)
+        print(f"{result.message} -> {out}", file=sys.stderr)
+    else:
+        print(dump_result(result, scene_name, extra), end="")
+    return 130
+
+
+def check_and_write(args, model, scene, result, extra) -> int:
+    """The re-check, ``--springs`` and ``--perturb`` of a finished search's
+    ``result``; writes the result with them (into ``extra``) and returns the
+    exit code of :func:`optimise_command`."""
+    arg = partial(_option, args)
+
+    quiet = arg("quiet", False)
     check = verify(model, result.k, scene, c=result.c)
     extra["verification"] = {"tighten": 10.0, "refine": 2, **check.to_dict()}
     lines = [verdict("re-check (rtol / 10, twice the samples)", check)]

@@ -113,7 +113,7 @@ from ..dynamics.pack import pack
 from ..dynamics.simulate import body_states
 from ..errors import SceneError, TrajectoryError, shown
 from ..model import Model
-from ..scene import COLLISION_MARGIN
+from ..scene import COLLISION_MARGIN, check_collision_tolerance
 from .geometry import CERTIFY_TOL, BoxSet, PairGeometry, box_signed_distance, pair_bound
 from .motion import HermiteSegment, PairSpeedBound
 from .refine import MAX_DEPTH, poses, refine_interval, stack
@@ -133,7 +133,8 @@ class CollisionSettings:
     ----------
     tolerance : float
         Interference depth beyond which touching panels collide (scene
-        ``collision.tolerance``).
+        ``collision.tolerance``); at least
+        :data:`~panel_deploy.scene.MIN_COLLISION_TOLERANCE`.
     refine : bool
         Check between samples (scene ``collision.refine``).
     resolution : float
@@ -168,6 +169,7 @@ class CollisionSettings:
     stamps: str = "header"
 
     def __post_init__(self):
+        check_collision_tolerance(self.tolerance, "collision.tolerance")
         for f in ("tolerance", "resolution", "time_resolution", "margin", "noise", "speed_interval"):
             v = getattr(self, f)
             if not v >= 0 or (f in ("resolution", "time_resolution") and v == 0):

@@ -8,7 +8,7 @@ import numpy as np
 from ..model import FLAT_TOLERANCE, Model, hinge_order
 from .kernels import cut_rates, hinge_law
 from .pack import pack
-from .result import SimulationResult
+from .result import ENERGY_FLOOR, SimulationResult
 
 #: A hinge has left its stowed angle once |theta - theta_stowed| exceeds this, rad.
 RELEASE_TOL = 1e-2
@@ -62,23 +62,23 @@ def first_time(t, mask):
     return float(t[hit[0]]) if len(hit) else None
 
 
+def total_energy(energy: dict) -> np.ndarray:
+    """E_kin + E_spring + E_grav + E_diss - W_constraint at every sample of a
+    result's ``energy``, J: constant in an exact integration."""
+    return (energy["kinetic"] + energy["spring"] + energy["gravity"] + energy["dissipated"]
+            - energy["constraint_work"])
+
+
 def energy_balance_error(result: SimulationResult) -> np.ndarray:
     """|E_kin + E_spring + E_grav + E_diss - W_constraint - E_0| / E_0 at every sample."""
-    E = result.energy
-    total = E["kinetic"] + E["spring"] + E["gravity"] + E["dissipated"] - E["constraint_work"]
+    total = total_energy(result.energy)
     return np.abs(total - total[0]) / abs(total[0])
-
-
-#: Initial energy (J) below which the relative energy balance error is
-#: round-off divided by round-off (k = 0 and g = 0: 1e17), reported as None.
-ENERGY_FLOOR = 1e-12
 
 
 def balance_error(result: SimulationResult) -> float | None:
     """Largest relative energy balance error of a run, or None when it means
     nothing: no energy at the start (k = 0, g = 0) or non-finite energies."""
-    E = result.energy
-    total = E["kinetic"] + E["spring"] + E["gravity"] + E["dissipated"] - E["constraint_work"]
+    total = total_energy(result.energy)
     if len(total) == 0 or not np.all(np.isfinite(total)) or abs(total[0]) < ENERGY_FLOOR:
         return None
     return float(energy_balance_error(result).max())

@@ -5,6 +5,7 @@ the same run (bit for bit) handed out in blocks of samples by
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -13,7 +14,8 @@ from ..model import Model, State
 from . import kernels
 from .integrate import integrate_blocks
 from .pack import pack
-from .result import SimulationResult
+from .report import total_energy
+from .result import ENERGY_FLOOR, ENERGY_LIMIT, SimulationResult, Status
 
 #: Gap at which a loop closure counts as blown up, as a fraction of the
 #: smallest in-plane panel edge (10 % of a 0.1 m panel = 10 mm).
@@ -53,10 +55,13 @@ def simulate(model: Model, settings, state: State | None = None, *,
     Returns
     -------
     SimulationResult
-        On failure (step collapse, non-finite state, gap blow-up, budget)
-        ``success`` is False, ``status`` the cause (a negative
+        On failure (step collapse, non-finite state, gap blow-up, budget,
+        relative energy balance error above
+        :data:`~panel_deploy.dynamics.result.ENERGY_LIMIT`) ``success`` is
+        False, ``status`` the cause (a negative
         :class:`~panel_deploy.dynamics.result.Status`) and the arrays hold the samples
-        computed before it (all finite). ``energy`` also has
+        computed before it (all finite; for the energy, up to the first sample
+        over the limit). ``energy`` also has
         "constraint_work", the work done on the system by the exact-closure
         constraint forces (Baumgarte stabilisation makes it non-zero; zero for
         penalty), so that ``kinetic + spring + gravity + dissipated -
@@ -136,14 +141,41 @@ def simulate_segments(model: Model, settings, state: State | None = None, *,
     stops = [*range(block, last, block), last]
     blocks = integrate_blocks(P, y, t_eval, settings, max_steps, limit, stops)
     first = 0
+    energy_0 = None
     while True:
         start = time.perf_counter()
         run = next(blocks, None)
         wall = time.perf_counter() - start
         if run is None:
             return
-        yield _result(P, t_eval[first:first + len(run.y)], run, settings.method, wall, limit)
+        result = _result(P, t_eval[first:first + len(run.y)], run, settings.method, wall, limit)
+        total = total_energy(result.energy)
+        if energy_0 is None and len(total):
+            energy_0 = total[0]
+        drifted = _energy_drift(result, total, energy_0)
+        if drifted is not None:
+            blocks.close()
+            yield drifted
+            return
+        yield result
         first += len(run.y)
+
+
+def _energy_drift(result: SimulationResult, total, energy_0) -> SimulationResult | None:
+    """``result`` up to its first sample whose relative energy balance error
+    exceeds :data:`~.result.ENERGY_LIMIT`, as a failure; None if there is none
+    (or the run starts without energy, where the error means nothing)."""
+    if energy_0 is None or abs(energy_0) < ENERGY_FLOOR:
+        return None
+    error = np.abs(total - energy_0) / abs(energy_0)
+    over = np.flatnonzero(error > ENERGY_LIMIT)
+    if not len(over):
+        return None
+    j = over[0]
+    return replace(result.head(j + 1), success=False, status=Status.ENERGY_DRIFT,
+                   message=f"energy balance error {error[j]:.3g} above {ENERGY_LIMIT:g} at "
+                           f"t = {result.t[j]:.6g} s: the integration is not accurate enough "
+                           f"(tighten simulation.rtol)")
 
 
 def body_states(P, theta, omega):

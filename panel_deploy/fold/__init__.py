@@ -7,7 +7,8 @@ The pipeline for an R x C array of identical panels (paper, section 2):
 2. decide whether it folds into two equal stacks without voids, and how
    (:mod:`.packing`);
 3. merge cells that stay side by side with the same stowed motion into rigid
-   bodies (:mod:`.merge`) and count the mobility (:mod:`.kutzbach`).
+   bodies (:mod:`.merge`) and count the mobility (:mod:`.kutzbach`), and find
+   it from the rank of the loop-closure Jacobian (:mod:`.mobility`).
 
 :func:`design` does all three for one circuit, :func:`designs` for every
 circuit of an array.
@@ -34,6 +35,7 @@ from .design import Cell, CellPlacement, FoldDesign, HingeState, Merge, StowedSt
 from .grid import check_cell, check_size, grid_graph, shared_edges
 from .kutzbach import assembly_dof, kutzbach_dof
 from .merge import merge_cells
+from .mobility import jacobian_mobility, loop_mobility
 from .packing import find_stowed_state, stowed_states
 
 __all__ = [
@@ -56,7 +58,9 @@ __all__ = [
     "designs",
     "find_stowed_state",
     "grid_graph",
+    "jacobian_mobility",
     "kutzbach_dof",
+    "loop_mobility",
     "merge_cells",
     "shared_edges",
     "stowed_states",

@@ -7,6 +7,7 @@ import itertools
 from ..errors import DesignError
 from .circuits import ENUMERATION_LIMIT, count_circuits, count_circuits_up_to_symmetry
 from .design import FoldDesign
+from .mobility import jacobian_mobility
 
 
 def _cell(c):
@@ -31,10 +32,14 @@ def design_dict(d: FoldDesign, index: int | None = None) -> dict:
     dict
         Keys ``rows, cols, index, circuit, ground, packs, reason, hinges,
         slits, footprint, stacks, placements, bodies, merges, refused_merges,
-        dof_cells, dof_bodies``. Hinges carry ``stowed_angle`` (0 or pi) and
+        dof_cells, dof_bodies, mobility_cells, mobility_bodies`` (Kutzbach's
+        count, and the mobility from the loop-closure Jacobian's rank,
+        :func:`.mobility.jacobian_mobility`: None when the design does not
+        pack). Hinges carry ``stowed_angle`` (0 or pi) and
         ``facet`` when the design packs; stacks are listed top layer first.
     """
     st = d.stowed
+    mobility = jacobian_mobility(d)
     hinges = []
     for u, v in d.hinges:
         h = {"cells": [_cell(u), _cell(v)]}
@@ -78,6 +83,8 @@ def design_dict(d: FoldDesign, index: int | None = None) -> dict:
         ],
         "dof_cells": d.dof_cells,
         "dof_bodies": d.dof_bodies,
+        "mobility_cells": mobility[0] if mobility else None,
+        "mobility_bodies": mobility[1] if mobility else None,
     }
     return out
 
@@ -121,6 +128,12 @@ def design_text(d: FoldDesign, index: int | None = None) -> str:
     lines.append(
         f"bodies: {len(d.bodies)}; Kutzbach DoF {d.dof_cells} (cells) -> {d.dof_bodies} (bodies)"
     )
+    mobility = jacobian_mobility(d)
+    if mobility is not None:
+        # Kutzbach counts six constraints a loop; parallel hinge lines impose fewer
+        cells, bodies = ("not found" if m is None else m for m in mobility)
+        lines.append(f"mobility from the loop-closure Jacobian's rank: {cells} (cells) -> "
+                     f"{bodies} (bodies)")
     return "\n".join(lines)
 
 

@@ -8,7 +8,10 @@ the cache by K and the evaluation budget on top of any backend.
 from __future__ import annotations
 
 import multiprocessing
+import multiprocessing.connection
 import os
+import signal
+import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -43,6 +46,19 @@ _WORKER_JOB = None
 def _init_worker(job):
     global _WORKER_JOB
     _WORKER_JOB = job
+    # Ctrl-C and timeout(1) signal the whole process group: a worker ended by
+    # that would break the pool under the parent, which is saving the best K
+    # so far. The parent ends the workers (ProcessBackend.close), or, if it
+    # is gone first (a worker it was starting when interrupted is never told
+    # to stop), the watch below does.
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
+    threading.Thread(target=_exit_with_parent, daemon=True).start()
+
+
+def _exit_with_parent():
+    multiprocessing.connection.wait([multiprocessing.parent_process().sentinel])
+    os._exit(1)
 
 
 def _evaluate_in_worker(kc):

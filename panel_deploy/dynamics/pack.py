@@ -59,6 +59,12 @@ class Packed(NamedTuple):
         m/s^2.
     has_gravity : bool
         False when gravity is zero, so the kernels skip all gravity work.
+    drag : float
+        1/2 rho C_d of the air (kg/m^3): face pressure per (m/s)^2 of normal velocity.
+    half_size : (n, 2) float
+        Half length and half width of each body's large faces, m.
+    has_air : bool
+        False when ``drag`` is zero, so the kernels skip all drag work.
     """
 
     n: int
@@ -91,6 +97,9 @@ class Packed(NamedTuple):
     regularisation: float
     gravity: np.ndarray
     has_gravity: bool
+    drag: float
+    half_size: np.ndarray
+    has_air: bool
 
 
 def _normal(axis):
@@ -118,6 +127,7 @@ def pack(model: Model) -> Packed:
     cl = model.closure
     method = TREE if not cuts else (PENALTY if cl.method == "penalty" else EXACT)
     gravity = np.array(model.gravity, dtype=float)  # a writable copy: numba types read-only arrays apart
+    drag = float(model.air.pressure_coefficient)
     return Packed(
         n=n,
         body=np.array(body_of + [model.ground], dtype=np.int64),
@@ -147,4 +157,8 @@ def pack(model: Model) -> Packed:
         regularisation=float(cl.regularisation),
         gravity=gravity,
         has_gravity=bool(np.any(gravity != 0.0)),
+        drag=drag,
+        half_size=np.array([0.5 * model.bodies[b].size[:2] for b in body_of],
+                           dtype=float).reshape(n, 2),
+        has_air=drag > 0.0,
     )

@@ -190,6 +190,12 @@ class AirParameters:
     density: float = 0.0
     drag_coefficient: float = 0.0
 
+    def __post_init__(self):
+        for name in ("density", "drag_coefficient"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0.0):  # negative drag would feed energy in
+                raise ModelError(f"air.{name}: expected a finite number >= 0, got {value!r}")
+
     @property
     def pressure_coefficient(self) -> float:
         """1/2 rho C_d, kg/m^3: the pressure (Pa) per (m/s)^2 of normal velocity."""

@@ -594,10 +594,12 @@ def _crba(P, R, p, S):
 # a = -w . e_y, b = w . e_x. The pressure -q |u| u (q = 1/2 rho C_d) acts once
 # per point: the two large faces meet the air on opposite sides, so their net
 # is one face area with the signed u. It is -q u^2 where u > 0 and q u^2 where
-# u < 0, a polynomial on each side of the line u = 0, which cuts the face into
-# two convex polygons: integrated exactly (to round-off) on them, there is no
-# quadrature error at the kink and no division by a or b (a closed form in
-# corner values of |u|^3 u / (a b) cancels catastrophically as a, b -> 0).
+# u < 0, a polynomial on each side of the line u = 0. Split along a diagonal,
+# the face is two triangles, and the line cuts each into a triangle and a
+# quadrilateral (the triangle less a corner): integrated exactly (to
+# round-off) on those, there is no quadrature error at the kink and no
+# division by a or b (a closed form in corner values of |u|^3 u / (a b)
+# cancels catastrophically as a, b -> 0).
 
 #: A triangle rule of degree 3 (exact for the cubic integrands u^2 s, u^2 r):
 #: weights of each vertex, each edge midpoint and the centroid, times the area.
@@ -627,6 +629,39 @@ def _triangle_u2(v0, a, b, p, q, t):
 
 
 @njit(cache=True)
+def _u(v0, a, b, x):
+    return v0 + a * x[0] + b * x[1]
+
+
+@njit(cache=True)
+def _towards(x, y, f):
+    """The point a fraction f of the way from x to y."""
+    return (x[0] + f * (y[0] - x[0]), x[1] + f * (y[1] - x[1]))
+
+
+@njit(cache=True)
+def _positive_part(v0, a, b, x, y, z):
+    """Integrals of u^2, s u^2, r u^2 over the part of triangle x, y, z where u >= 0."""
+    ux, uy, uz = _u(v0, a, b, x), _u(v0, a, b, y), _u(v0, a, b, z)
+    count = (ux >= 0.0) + (uy >= 0.0) + (uz >= 0.0)
+    if count == 0:
+        return ZERO3
+    whole = _triangle_u2(v0, a, b, x, y, z)
+    if count == 3:
+        return whole
+    # the vertex alone on its side of u = 0 first
+    if (ux >= 0.0) != (uy >= 0.0) and (ux >= 0.0) != (uz >= 0.0):
+        p, q, t, up, uq, ut = x, y, z, ux, uy, uz
+    elif (uy >= 0.0) != (ux >= 0.0):  # then x is on z's side
+        p, q, t, up, uq, ut = y, z, x, uy, uz, ux
+    else:
+        p, q, t, up, uq, ut = z, x, y, uz, ux, uy
+    corner = _triangle_u2(v0, a, b, p, _towards(p, q, up / (up - uq)),
+                          _towards(p, t, up / (up - ut)))
+    return corner if count == 1 else _sub(whole, corner)
+
+
+@njit(cache=True)
 def face_drag(v0, a, b, half_length, half_width):
     """Integrals of |u| u, s |u| u and r |u| u over the face, u = v0 + a s + b r.
 
@@ -640,44 +675,19 @@ def face_drag(v0, a, b, half_length, half_width):
     whole = (area * (v0 * v0 + (a * a * A * A + b * b * B * B) / 3.0),
              area * 2.0 * v0 * a * A * A / 3.0,
              area * 2.0 * v0 * b * B * B / 3.0)
-    cs = (-A, A, A, -A)
-    cr = (-B, -B, B, B)
-    lo = hi = v0 - a * A - b * B
-    for i in range(1, 4):
-        u = v0 + a * cs[i] + b * cr[i]
-        lo = min(lo, u)
-        hi = max(hi, u)
-    if lo >= 0.0:
+    reach = abs(a) * A + abs(b) * B
+    if v0 >= reach:
         return whole
-    if hi <= 0.0:
+    if v0 <= -reach:
         return _scale(whole, -1.0)
-    # the part where u >= 0: a line cuts a quadrilateral into at most a pentagon
-    ps = np.empty(5)
-    pr = np.empty(5)
-    m = 0
-    for i in range(4):
-        j = (i + 1) % 4
-        ui = v0 + a * cs[i] + b * cr[i]
-        uj = v0 + a * cs[j] + b * cr[j]
-        if ui >= 0.0:
-            ps[m] = cs[i]
-            pr[m] = cr[i]
-            m += 1
-        if (ui >= 0.0) != (uj >= 0.0):
-            f = ui / (ui - uj)
-            ps[m] = cs[i] + f * (cs[j] - cs[i])
-            pr[m] = cr[i] + f * (cr[j] - cr[i])
-            m += 1
-    positive = ZERO3
-    for k in range(1, m - 1):
-        positive = _add(positive, _triangle_u2(v0, a, b, (ps[0], pr[0]), (ps[k], pr[k]),
-                                               (ps[k + 1], pr[k + 1])))
-    # |u| u is u^2 on the positive part and -u^2 on the rest
+    c0, c1, c2, c3 = (-A, -B), (A, -B), (A, B), (-A, B)
+    positive = _add(_positive_part(v0, a, b, c0, c1, c2), _positive_part(v0, a, b, c0, c2, c3))
+    # |u| u is u^2 where u > 0 and -u^2 elsewhere
     return _sub(_scale(positive, 2.0), whole)
 
 
 @njit(cache=True)
-def body_drag(P, R, i, v, w):
+def body_drag(air, R, i, v, w):
     """Air drag on body i with centroid velocity v (m/s) and angular velocity
     w (rad/s), ground frame: force (N), torque about the centroid (N m) and
     the power it dissipates (W, >= 0: ``q * integral |u|^3``).
@@ -692,11 +702,31 @@ def body_drag(P, R, i, v, w):
     v0 = _dot(n, v)
     a = -_dot(w, e2)
     b = _dot(w, e1)
-    I0, Is, Ir = face_drag(v0, a, b, P.half_size[i, 0], P.half_size[i, 1])
-    q = P.drag
+    I0, Is, Ir = face_drag(v0, a, b, air[i, 0], air[i, 1])
+    q = air[i, 2]
     # (s e1 + r e2) x n = r e1 - s e2, times the pressure -q |u| u
     torque = _scale(_sub(_scale(e2, Is), _scale(e1, Ir)), q)
     return _scale(n, -q * I0), torque, q * (v0 * I0 + a * Is + b * Ir)
+
+
+@njit(cache=True)
+def air_drag(P, air, R, p, w, vo, f):
+    """Subtract the air drag wrench of every body from its row of f (n + 1, 6),
+    the bias wrenches about the ground origin; returns the power dissipated, W.
+
+    ``air`` is ``P.air``, passed apart so that numba types None (no air) as
+    the argument and prunes the rest of the function.
+    """
+    if air is None:
+        return 0.0
+    power = 0.0
+    for i in range(P.n):
+        pi, wi = _get(p, i), _get(w, i)
+        force, torque, pw = body_drag(air, R, i, _add(_get(vo, i), _cross(wi, pi)), wi)
+        _put(f, i, _sub(_get(f, i), _add(torque, _cross(pi, force))))
+        _put(f, i, _sub(_get(f, i, 3), force), 3)
+        power += pw
+    return power
 
 
 @njit(cache=True)
@@ -744,13 +774,9 @@ def mass_and_bias(P, theta, omega):
             fw = _sub(fw, _cross(pi, fg))
             fv = _sub(fv, fg)
             gravity_energy -= _dot(fg, _sub(pi, _get(P.r0, i)))
-        if P.has_air:
-            fa, ta, pa = body_drag(P, R, i, _add(voi, _cross(wi, pi)), wi)
-            fw = _sub(fw, _add(ta, _cross(pi, fa)))
-            fv = _sub(fv, fa)
-            dissipation += pa
         _put(f, i, _add(_get(f, i), fw))
         _put(f, i, _add(_get(f, i, 3), fv), 3)
+    dissipation += air_drag(P, P.air, R, p, w, vo, f)
     Q = np.empty(n)
     for i in range(n - 1, -1, -1):
         tau, e, pw = hinge_law(theta[i], omega[i], P.k[i], P.c[i], P.k_s, P.c_s)

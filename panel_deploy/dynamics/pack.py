@@ -59,12 +59,12 @@ class Packed(NamedTuple):
         m/s^2.
     has_gravity : bool
         False when gravity is zero, so the kernels skip all gravity work.
-    drag : float
-        1/2 rho C_d of the air (kg/m^3): face pressure per (m/s)^2 of normal velocity.
-    half_size : (n, 2) float
-        Half length and half width of each body's large faces, m.
-    has_air : bool
-        False when ``drag`` is zero, so the kernels skip all drag work.
+    air : (n, 3) float, or None without air
+        Per body: half length and half width of its large faces (m), and
+        1/2 rho C_d (kg/m^3), the face pressure per (m/s)^2 of normal
+        velocity. None when the model has no air: numba then compiles the
+        kernels without the drag code (a flag or an empty array kept it, and
+        cost a run without air 5-9 % in speed).
     """
 
     n: int
@@ -97,9 +97,7 @@ class Packed(NamedTuple):
     regularisation: float
     gravity: np.ndarray
     has_gravity: bool
-    drag: float
-    half_size: np.ndarray
-    has_air: bool
+    air: np.ndarray | None
 
 
 def _normal(axis):
@@ -157,8 +155,6 @@ def pack(model: Model) -> Packed:
         regularisation=float(cl.regularisation),
         gravity=gravity,
         has_gravity=bool(np.any(gravity != 0.0)),
-        drag=drag,
-        half_size=np.array([0.5 * model.bodies[b].size[:2] for b in body_of],
-                           dtype=float).reshape(n, 2),
-        has_air=drag > 0.0,
+        air=np.array([[*(0.5 * model.bodies[b].size[:2]), drag] for b in body_of],
+                     dtype=float).reshape(n, 3) if drag > 0.0 else None,
     )

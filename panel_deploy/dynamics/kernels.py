@@ -692,9 +692,10 @@ def body_drag(air, R, i, v, w):
     w (rad/s), ground frame: force (N), torque about the centroid (N m) and
     the power it dissipates (W, >= 0: ``q * integral |u|^3``).
 
-    Quasi-steady pressure ``-q |u| u`` (q = ``P.drag``) on the large faces
-    only: the edges (thickness t) and any shielding between stacked or
-    nearby panels are left out, and the air is still.
+    ``air`` is ``Packed.air`` and R the orientations (n + 1, 3, 3). A
+    quasi-steady pressure ``-q |u| u`` (q = ``air[i, 2]``) on the large faces
+    only: the edges (thickness t), any shielding between stacked or nearby
+    panels and the added mass of the air are left out, and the air is still.
     """
     e1 = (R[i, 0, 0], R[i, 1, 0], R[i, 2, 0])
     e2 = (R[i, 0, 1], R[i, 1, 1], R[i, 2, 1])

@@ -53,8 +53,8 @@ The MJCF model is the same multibody system, written so that MuJoCo's
   panel swinging about a hinge on its edge that gives 5/64 rho C_d w L^4
   omega |omega| (centroid drag times its lever, plus the spin term) against
   our 1/8, 37.5 % less. MuJoCo also drags the edge faces (t/a of the face
-  area: 5 % for the paper's panels) and spins in the panel plane, which we
-  leave out, and the ground body moves in neither.
+  area: 5 % for the paper's panels) and resists a spin about the face
+  normal, both of which we leave out.
 
 Units are SI throughout, angles in radians.
 """

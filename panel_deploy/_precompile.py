@@ -26,8 +26,11 @@ from ._numba_cache import COMPILED_MARKER
 
 def jobs(scene: str, folder: Path) -> list[list[str]]:
     """The command lines whose kernels are compiled: every main job that runs
-    kernels, both compiled integrators and the scipy path."""
+    kernels, both compiled integrators and the scipy path; and the main job
+    and its check in air, whose packed model numba types apart (its drag
+    field is an array, not None)."""
     trajectory, recording = str(folder / "run.npz"), str(folder / "run.mcap")
+    in_air = str(folder / "air.npz")
     return [
         ["simulate", scene, "--out", trajectory, "--record", recording],
         ["collide", trajectory],
@@ -35,6 +38,8 @@ def jobs(scene: str, folder: Path) -> list[list[str]]:
         # the exact closure is not stiff: the explicit DOPRI5 loop
         ["simulate", scene, "--closure", "exact", "--t-end", "0.05"],
         ["simulate", scene, "--method", "RK45", "--t-end", "0.01"],
+        ["simulate", scene, "--set", "air.density=1.2", "--t-end", "0.05", "--out", in_air],
+        ["collide", in_air],
     ]
 
 

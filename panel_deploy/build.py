@@ -11,7 +11,7 @@ import numpy as np
 
 from . import fold
 from .errors import DesignError, SceneError, shown
-from .model import Body, ClosureParameters, Hinge, Model, box_inertia
+from .model import AirParameters, Body, ClosureParameters, Hinge, Model, box_inertia
 from .scene import Scene
 
 
@@ -176,7 +176,8 @@ def build_model(scene: Scene, design=None) -> Model:
     try:
         return Model.build(bodies, hinges, ground, cut_hinges=cuts, k_s=scene.contact.k_s,
                            c_s=scene.contact.c_s, closure=closure, gravity=scene.gravity,
-                           name=scene.name or "", hinge_groups=groups)
+                           name=scene.name or "", hinge_groups=groups,
+                           air=AirParameters(scene.air.density, scene.air.drag_coefficient))
     except Exception as e:  # ModelError from a bad cut list
         if cuts is not None:
             raise SceneError("closure.cut_hinge", str(e)) from None

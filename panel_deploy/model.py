@@ -177,6 +177,32 @@ class ClosureParameters:
 
 
 @dataclass(frozen=True)
+class AirParameters:
+    """Still air around the array: quadratic pressure drag on the panel faces.
+
+    ``density`` rho (kg/m^3; 0: no air, the paper's model) and
+    ``drag_coefficient`` C_d (dimensionless) of the pressure ``p = -1/2 rho
+    C_d |v_n| v_n`` on every point of a panel's large face, v_n the point's
+    velocity along the face normal (m/s); see
+    :func:`panel_deploy.dynamics.kernels.face_drag`.
+    """
+
+    density: float = 0.0
+    drag_coefficient: float = 0.0
+
+    def __post_init__(self):
+        for name in ("density", "drag_coefficient"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0.0):  # negative drag would feed energy in
+                raise ModelError(f"air.{name}: expected a finite number >= 0, got {value!r}")
+
+    @property
+    def pressure_coefficient(self) -> float:
+        """1/2 rho C_d, kg/m^3: the pressure (Pa) per (m/s)^2 of normal velocity."""
+        return 0.5 * self.density * self.drag_coefficient
+
+
+@dataclass(frozen=True)
 class Model:
     """Immutable multibody model: bodies, hinges, spanning tree, parameters.
 
@@ -212,6 +238,8 @@ class Model:
     hinge_groups : tuple of tuple of int
         Hinge indices that share one stiffness (the scene's ``hinges.groups``
         and mirror symmetry); empty: every hinge on its own.
+    air : AirParameters
+        Air drag on the panel faces (default: none).
     """
 
     bodies: tuple
@@ -229,6 +257,7 @@ class Model:
     collision_pairs: tuple
     name: str = ""
     hinge_groups: tuple = ()
+    air: AirParameters = AirParameters()
 
     def __post_init__(self):
         _freeze(self, gravity=(3,))
@@ -271,7 +300,8 @@ class Model:
 
     @classmethod
     def build(cls, bodies, hinges, ground=0, *, cut_hinges=None, k_s=0.0, c_s=0.0,
-              closure=ClosureParameters(), gravity=(0.0, 0.0, 0.0), name="", hinge_groups=()):
+              closure=ClosureParameters(), gravity=(0.0, 0.0, 0.0), name="", hinge_groups=(),
+              air=AirParameters()):
         """Build a model: spanning tree from the ground, cut hinges, collision pairs.
 
         Parameters
@@ -283,7 +313,7 @@ class Model:
         cut_hinges : sequence of int, optional
             Hinges to cut, one per independent loop. By default, for each loop
             the hinge farthest from the ground (breadth-first) is cut.
-        k_s, c_s, closure, gravity, name, hinge_groups
+        k_s, c_s, closure, gravity, name, hinge_groups, air
             See the class attributes.
 
         Raises
@@ -334,7 +364,7 @@ class Model:
         return cls(tuple(bodies), tuple(hinges), ground, tuple(joints), tuple(parent),
                    tuple(body_joint), tuple(order), cut_hinges, float(k_s), float(c_s),
                    closure, gravity, pairs, str(name),
-                   tuple(tuple(int(i) for i in g) for g in hinge_groups))
+                   tuple(tuple(int(i) for i in g) for g in hinge_groups), air)
 
 
 def hinge_order(model: Model) -> list:

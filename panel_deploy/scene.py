@@ -57,6 +57,12 @@ COLLISION_MARGIN = 0.02
 MIN_COLLISION_TOLERANCE = 1e-9
 _WHY_TOLERANCE = ("panels touching in the stowed stacks are 0 apart, so a smaller tolerance "
                   "takes the package for a collision")
+#: Densest fluid the drag model takes, kg/m^3: it has no added mass, which in a
+#: gas is a few % of a panel's mass (air on the paper's 20 g panels: about 3 %) but in a
+#: liquid several times it.
+MAX_FLUID_DENSITY = 100.0
+_WHY_FLUID = ("a gas (Venus's surface: 65 kg/m^3); a liquid's added mass, "
+              "which the model leaves out, would outweigh the panels")
 
 
 # --- field parsers: each takes (value, path) and returns the parsed value or raises ---
@@ -368,6 +374,17 @@ class CollisionSection:
                        "that leave stamps unfilled")
 
 
+@dataclass(frozen=True)
+class AirSection:
+    density: float = spec(0.0, number(0.0, MAX_FLUID_DENSITY, why=_WHY_FLUID), "kg/m^3",
+                          "density of the still air around the array; 0: no air (the paper's "
+                          "model; sea level: 1.2)")
+    drag_coefficient: float = spec(1.17, number(0.0, 5.0, why="a flat plate normal to the "
+                                                              "flow has 1.17 (square) to 2 (strip)"),
+                                   "", "C_d of the panel faces: pressure -1/2 rho C_d |v_n| v_n "
+                                       "on the normal velocity v_n of each face point")
+
+
 def _bounds(v, path):
     if not isinstance(v, (list, tuple)) or len(v) != 2:
         raise SceneError(path, f"expected [lower, upper], got {shown(v)}")
@@ -421,6 +438,7 @@ class Scene:
     gravity: tuple = (0.0, -9.81, 0.0)
     simulation: SimulationSection = SimulationSection()
     collision: CollisionSection = CollisionSection()
+    air: AirSection = AirSection()
     optimisation: OptimisationSection = OptimisationSection()
     name: str = ""
     description: str = ""
@@ -434,7 +452,7 @@ class Scene:
 SECTIONS = {
     "array": ArraySection, "fold": FoldSection, "hinges": HingeSection,
     "contact": ContactSection, "closure": ClosureSection,
-    "simulation": SimulationSection, "collision": CollisionSection,
+    "simulation": SimulationSection, "collision": CollisionSection, "air": AirSection,
     "optimisation": OptimisationSection,
 }
 TOP_LEVEL = {"gravity": (vector3, "m/s^2", "gravity in the flat array frame (y towards row 1)"),

@@ -147,3 +147,15 @@ def test_the_model_is_immutable_and_typed(model):
     assert (stiffer.name, stiffer.hinge_groups) == (model.name, model.hinge_groups)
     assert np.allclose(stiffer.stiffness, 2 * model.stiffness)
     assert [h.c / h.k for h in stiffer.hinges] == pytest.approx([h.c / h.k for h in model.hinges])
+
+
+def test_air_parameters_refuse_what_would_feed_energy_in():
+    from panel_deploy.errors import ModelError
+    from panel_deploy.model import AirParameters
+
+    assert AirParameters(1.2, 1.17).pressure_coefficient == pytest.approx(0.5 * 1.2 * 1.17)
+    assert AirParameters().pressure_coefficient == 0.0
+    with pytest.raises(ModelError, match=r"^air.density: expected a finite number >= 0, got -1.2"):
+        AirParameters(-1.2, 1.17)
+    with pytest.raises(ModelError, match=r"^air.drag_coefficient: expected a finite number >= 0"):
+        AirParameters(1.2, float("nan"))

@@ -8,11 +8,11 @@ from scipy.integrate import solve_ivp
 
 from panel_deploy.build import build_model
 from panel_deploy.dynamics import Status, simulate, simulate_segments
-from panel_deploy.dynamics.report import total_energy
+from panel_deploy.dynamics.report import balance_error, total_energy
 from panel_deploy.dynamics.result import ENERGY_LIMIT, PER_SAMPLE, concatenate
 from panel_deploy.errors import ModelError
 from panel_deploy.kinematics import axis_rotation
-from panel_deploy.model import State
+from panel_deploy.model import AirParameters, State
 from panel_deploy.scene import SimulationSection, load_scene, resolve_scene
 
 from test_dynamics_helpers import plate_on_hinge, random_branched
@@ -97,6 +97,50 @@ def test_dissipated_energy_closes_balance(closure):
     E = total_energy(r.energy)
     assert r.energy["dissipated"][-1] > 1e-2 * abs(E[0])
     assert np.abs(E - E[0]).max() < 1e-6 * abs(E[0])
+
+
+AIR = AirParameters(1.2, 1.17)
+
+
+def swing(model, method="compiled", t_end=1.0):
+    """The panel of ``plate_on_hinge`` released at theta = 0.3 rad, at rest."""
+    state = State(0.0, np.array([0.3]), np.zeros(1))
+    r = simulate(model, SimulationSection(t_end=t_end, method=method, rtol=1e-10, atol=1e-12,
+                                          samples=101), state)
+    assert r.success, r.message
+    return r
+
+
+@pytest.mark.parametrize("method", ["RK45", "Radau", "dopri5", "ros34pw2"])
+def test_air_drag_only_removes_energy(method):
+    """A pendulum (no spring, no damper; gravity across the horizontal hinge axis,
+    equilibrium at theta = pi/2, swinging within (0, pi)) loses energy to the air
+    alone, and the balance counts it as dissipated."""
+    still = plate_on_hinge(k=0.0, c=0.0, gravity=(0.0, 0.0, 9.81))
+    r = swing(dataclasses.replace(still, air=AIR), method)
+    assert 0 < r.theta.min() and r.theta.max() < np.pi
+    mechanical = r.energy["kinetic"] + r.energy["spring"] + r.energy["gravity"]
+    assert np.all(np.diff(r.energy["dissipated"]) >= 0)
+    assert r.energy["dissipated"][-1] > 1e-3 * abs(total_energy(r.energy)[0])
+    assert balance_error(r) < 1e-6 < ENERGY_LIMIT
+    without = swing(still, method)
+    assert np.all(without.energy["dissipated"] == 0)
+    assert mechanical[-1] < (without.energy["kinetic"] + without.energy["gravity"])[-1]
+
+
+@pytest.mark.parametrize("closure", ["penalty", "exact"])
+def test_air_drag_closes_the_balance_with_either_closure(closure):
+    model = dataclasses.replace(random_branched(0, closure=closure), air=AIR)
+    state = State(0.0, np.full(model.n_coords, 0.02), np.zeros(model.n_coords))
+    r = simulate(model, SimulationSection(t_end=0.05, method="compiled", rtol=1e-10,
+                                          atol=1e-12, samples=21), state)
+    assert r.success, r.message
+    E = total_energy(r.energy)
+    assert np.abs(E - E[0]).max() < 1e-6 * abs(E[0])
+    dampers = simulate(random_branched(0, closure=closure),
+                       SimulationSection(t_end=0.05, method="compiled", rtol=1e-10, atol=1e-12,
+                                         samples=21), state)
+    assert r.energy["dissipated"][-1] > dampers.energy["dissipated"][-1]
 
 
 def test_step_budget_failure_returns_finite_partial_result():

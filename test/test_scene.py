@@ -92,6 +92,16 @@ def test_defaults_and_density():
      "optimisation.damping_ratio_bounds: the search starts from hinges.damping_ratio = 0.043"),
     ("hinges.groups", [[]], "hinges.groups[0]: a group needs at least one hinge"),
     ("contact", [1, 2], "contact: expected a mapping"),
+    # issue 31: the air around the array
+    ("air.density", -1.2, "air.density: expected a number >= 0, got -1.2"),
+    ("air.density", 1000.0, "air.density: expected a number <= 100, got 1000 (limit: a gas"),
+    ("air.density", "sea level", "air.density: expected a number, got str"),
+    ("air.drag_coefficient", -1, "air.drag_coefficient: expected a number >= 0, got -1"),
+    ("air.drag_coefficient", 20, "air.drag_coefficient: expected a number <= 5, got 20 "
+                                 "(limit: a flat plate"),
+    ("air.viscosity", 1.8e-5, "air.viscosity: unknown key (expected one of density, "
+                              "drag_coefficient)"),
+    ("air", 1.2, "air: expected a mapping"),
     ("velocity", 3, "velocity: unknown section"),
 ])
 def test_bad_values_name_the_key(path, value, expected):
@@ -114,6 +124,22 @@ def test_the_least_density_holds_for_density_and_mass_alike():
     assert scene_from_dict(with_("array.mass", 1e-5)).array.unit_mass == 1e-5
     d["array"]["density"] = 0.16
     assert scene_from_dict(d).array.unit_mass == pytest.approx(0.16 * 0.1 * 0.1 * 0.005)
+
+
+def test_air_is_off_by_default_and_reaches_the_model():
+    from panel_deploy.build import build_model
+    s = scene_from_dict(MINIMAL)
+    assert (s.air.density, s.air.drag_coefficient) == (0.0, 1.17)
+    assert build_model(s).air.pressure_coefficient == 0.0
+    air = build_model(scene_from_dict(with_("air.density", 1.2))).air
+    assert (air.density, air.drag_coefficient) == (1.2, 1.17)
+    assert "air.density" in describe_schema() and "air.drag_coefficient" in describe_schema()
+
+
+def test_cli_bad_air_is_one_line_before_any_work(capsys):
+    assert main(["simulate", str(PAPER), "--set", "air.density=-1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["panel-deploy: error: --set air.density: expected a number >= 0, got -1"]
 
 
 def test_missing_required_keys():

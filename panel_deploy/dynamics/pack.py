@@ -59,6 +59,12 @@ class Packed(NamedTuple):
         m/s^2.
     has_gravity : bool
         False when gravity is zero, so the kernels skip all gravity work.
+    air : (n, 3) float, or None without air
+        Per body: half length and half width of its large faces (m), and
+        1/2 rho C_d (kg/m^3), the face pressure per (m/s)^2 of normal
+        velocity. None when the model has no air: numba then compiles the
+        kernels without the drag code (a flag or an empty array kept it, and
+        cost a run without air 5-9 % in speed).
     """
 
     n: int
@@ -91,6 +97,7 @@ class Packed(NamedTuple):
     regularisation: float
     gravity: np.ndarray
     has_gravity: bool
+    air: np.ndarray | None
 
 
 def _normal(axis):
@@ -118,6 +125,7 @@ def pack(model: Model) -> Packed:
     cl = model.closure
     method = TREE if not cuts else (PENALTY if cl.method == "penalty" else EXACT)
     gravity = np.array(model.gravity, dtype=float)  # a writable copy: numba types read-only arrays apart
+    drag = float(model.air.pressure_coefficient)
     return Packed(
         n=n,
         body=np.array(body_of + [model.ground], dtype=np.int64),
@@ -147,4 +155,6 @@ def pack(model: Model) -> Packed:
         regularisation=float(cl.regularisation),
         gravity=gravity,
         has_gravity=bool(np.any(gravity != 0.0)),
+        air=np.array([[*(0.5 * model.bodies[b].size[:2]), drag] for b in body_of],
+                     dtype=float).reshape(n, 3) if drag > 0.0 else None,
     )

@@ -70,7 +70,7 @@ class SimulationResult:
     energy : dict of str -> (s,) ndarray
         "kinetic", "spring" (hinge springs, contact and penalty springs),
         "gravity" (potential, zero at the flat state), "dissipated" (work done
-        by all dampers since t = 0), in J.
+        by all dampers and the air drag since t = 0), in J.
     constraint_gap : (s,) ndarray
         Largest loop-closure gap |MM'|, |NN'| over the cut hinges, m (zeros
         for a tree).

@@ -272,7 +272,7 @@ def _relative(source) -> str:
 
 def model_record(model) -> dict:
     """The ``model`` metadata record: k and c of one spring per hinge (model
-    order), springs per hinge, joint-stop contact, closure and gravity."""
+    order), springs per hinge, joint-stop contact, closure, gravity and air."""
     c = model.closure
     return {"hinges": [h.name for h in model.hinges],
             "stiffness": [float(h.k) for h in model.hinges],           # N m/rad, one spring
@@ -280,7 +280,8 @@ def model_record(model) -> dict:
             "springs": [int(h.springs) for h in model.hinges],
             "k_s": float(model.k_s), "c_s": float(model.c_s),
             "closure": c.method, "k_M": c.k_M, "c_M": c.c_M, "k_N": c.k_N, "c_N": c.c_N,
-            "gravity": [float(g) for g in model.gravity]}
+            "gravity": [float(g) for g in model.gravity],
+            "air_density": model.air.density, "drag_coefficient": model.air.drag_coefficient}
 
 
 def integrator_record(scene) -> dict:

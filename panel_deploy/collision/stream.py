@@ -211,8 +211,9 @@ class StreamCheck:
 
     def verdict(self) -> tuple:
         """``(level, message, values)``: level 0 no collision so far, 1 a
-        clean verdict the stream's faults (refused messages, gaps) put in
-        doubt, 2 collided. Times in ``values`` count from ``origin``."""
+        clean verdict the stream's faults (refused messages, gaps, skipped
+        samples) put in doubt, 2 collided (the faults said after it). Times in
+        ``values`` count from ``origin``."""
         c = self.check
         if c is None:
             refused = sum(self.refused.values())
@@ -233,12 +234,6 @@ class StreamCheck:
                   "gaps": self.gaps, "largest_gap": self.largest_gap, "skipped": self.skipped,
                   "solved": list(self.solved), "measured": list(self.measured)}
         values.update({f"refused_{field}": n for field, n in self.refused.items()})
-        if c.collided:
-            e = c.first_events[0]
-            values.update(first_collision_pair=list(e.names), first_collision_t=e.t,
-                          approach_speed=max(x.approach_speed if math.isfinite(x.approach_speed)
-                                             else x.normal_speed for x in c.first_events))
-            return 2, f"collision between {e.names[0]} and {e.names[1]} at t = {e.t:.4f} s", values
         faults = []
         if refused:
             worst = max(self.refused, key=self.refused.get)
@@ -249,6 +244,14 @@ class StreamCheck:
             faults.append(f"{self.skipped} of {self.skipped + c.checked} joint states skipped to "
                           f"keep up (the newest checked); d is over the checked ones, an upper "
                           f"bound")
+        if c.collided:
+            e = c.first_events[0]
+            values.update(first_collision_pair=list(e.names), first_collision_t=e.t,
+                          approach_speed=max(x.approach_speed if math.isfinite(x.approach_speed)
+                                             else x.normal_speed for x in c.first_events))
+            # The collision stands; what the stream lacked is said beside it.
+            return 2, "; ".join([f"collision between {e.names[0]} and {e.names[1]} at "
+                                 f"t = {e.t:.4f} s", *faults]), values
         if faults:
             return 1, "no collision seen, but " + "; ".join(faults), values
         return 0, "no collision", values

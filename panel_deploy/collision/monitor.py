@@ -145,6 +145,12 @@ class CollisionSettings:
         Broad phase: a pair whose cheap lower bound exceeds this is not
         computed exactly at a sample (its entry of D holds the bound), unless
         it could be the smallest distance of that sample. ``inf`` computes all.
+    prune : bool
+        Between samples, screen the pairs of each interval by an O(1) cap on
+        their speed bound before the bound itself (:func:`.refine.refine_interval`):
+        the same decisions and results, to the bit, at O(pairs) instead of
+        O(pairs x path length) a sample. False bounds every pair (the
+        reference the tests compare against).
     noise : float
         Standard deviation of the measured angles, rad (encoders); 0 for a
         simulated stream. Above 0 a pair collides only when it is deeper
@@ -164,6 +170,7 @@ class CollisionSettings:
     resolution: float = 1.0e-6
     time_resolution: float = 1.0e-6
     margin: float = COLLISION_MARGIN
+    prune: bool = True
     noise: float = 0.0
     speed_interval: float = 0.0
     stamps: str = "header"
@@ -325,7 +332,7 @@ class CollisionMonitor:
         self._speed = PairSpeedBound(model, self.pairs)
         sp = self._speed
         self._geo = (self._packed, self._boxes.half, self._a, self._b, sp.coords, sp.mask, sp.chain_a,
-                     sp.chain_b, sp.parents, sp.points, sp.axes)
+                     sp.chain_b, sp.parents, sp.points, sp.axes, sp.tree, sp.lca, sp.reach_a, sp.reach_b)
         self._stack = stack(16, len(self.pairs), model.n_bodies, model.n_coords)
         flat = np.zeros(model.n_coords)
         rows = np.arange(len(self.pairs))
@@ -481,7 +488,7 @@ class CollisionMonitor:
         seg = _segment(prev, cur)
         while True:
             found_t, last_touch, order, pressed, steps, midpoint = refine_interval(
-                self._geo, seg.coefficients, (-s.tolerance, s.resolution, s.time_resolution),
+                self._geo, seg.coefficients, (-s.tolerance, s.resolution, s.time_resolution, s.prune),
                 cur.t, prev.distances, cur.distances, prev.radii, cur.radii, self.colliding, self._stack)
             if steps >= 0:
                 break

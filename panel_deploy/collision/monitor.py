@@ -335,8 +335,12 @@ class CollisionMonitor:
                      sp.chain_b, sp.parents, sp.points, sp.axes, sp.tree, sp.lca, sp.reach_a, sp.reach_b)
         self._stack = stack(16, len(self.pairs), model.n_bodies, model.n_coords)
         flat = np.zeros(model.n_coords)
-        rows = np.arange(len(self.pairs))
-        self.flat_contact = self._distances_at(flat, rows) <= self.collision.tolerance
+        self._scratch.set_poses(*self._kinematics(flat))
+        # A pair whose cheap lower bound exceeds the tolerance cannot touch:
+        # FCL only for the others (the slits' neighbours, ~4 a panel).
+        near = np.flatnonzero(self._scratch.lower_bounds(self.pairs) <= self.collision.tolerance)
+        self.flat_contact = np.zeros(len(self.pairs), dtype=bool)
+        self.flat_contact[near] = self._distances_at(flat, near) <= self.collision.tolerance
         self.resting = None
         self._release = np.zeros(len(self.pairs))
         self.package_height = math.nan

@@ -27,28 +27,6 @@ from numba import njit
 from ..model import Model
 
 
-def tree_path(model: Model, a: int, b: int):
-    """Bodies and coordinates on the tree path from body a to body b.
-
-    Returns ``(bodies, coords)``: ``bodies`` b_0 = a, ..., b_m = b and
-    ``coords[k - 1]`` the index into ``theta`` of the joint between
-    b_{k-1} and b_k.
-    """
-    def up(x):
-        chain = [x]
-        while model.parent[chain[-1]] >= 0:
-            chain.append(model.parent[chain[-1]])
-        return chain
-
-    ua, ub = up(a), up(b)
-    common = next(x for x in ua if x in set(ub))
-    side_a = ua[:ua.index(common) + 1]
-    side_b = ub[:ub.index(common)][::-1]
-    bodies = side_a + side_b
-    coords = [model.body_joint[x] for x in side_a[:-1]] + [model.body_joint[x] for x in side_b]
-    return bodies, coords
-
-
 class PairSpeedBound:
     """Bound on how fast each pair's signed distance can change (module docstring).
 
@@ -64,30 +42,17 @@ class PairSpeedBound:
         self.a, self.b = pairs[:, 0], pairs[:, 1]
         self.half = np.array([np.asarray(b.size, dtype=float) / 2.0 for b in model.bodies])
         diag = 2.0 * np.linalg.norm(self.half, axis=1)
-        paths = [tree_path(model, int(a), int(b)) for a, b in pairs]
-        M = max((len(c) for _, c in paths), default=0)
-        depth = np.zeros(model.n_bodies, dtype=int)
-        for x in model.order:
-            depth[x] = depth[model.parent[x]] + 1 if model.parent[x] >= 0 else 0
-        # For speed_caps: each pair's deepest common ancestor, and the bodies
-        # with the coordinate joining each to its parent, parents first.
-        self.lca = np.array([min(bodies, key=lambda x: depth[x]) for bodies, _ in paths], dtype=np.int64)
+        # The tree path of each pair (speed bound, module docstring) and, for
+        # speed_caps, its lowest common ancestor and the bodies with the
+        # coordinate joining each to its parent, parents first.
         self.tree = (np.array(model.order, dtype=np.int64), np.array(model.parent, dtype=np.int64),
                      np.array(model.body_joint, dtype=np.int64))
-        self.coords = np.zeros((len(pairs), M), dtype=int)
-        self.mask = np.zeros((len(pairs), M))
-        self.chain_a = np.zeros((len(pairs), M))
-        self.chain_b = np.zeros((len(pairs), M))
-        for p, (bodies, coords) in enumerate(paths):
-            m = len(coords)
-            d = diag[bodies]
-            self.coords[p, :m] = coords
-            self.mask[p, :m] = 1.0
-            self.chain_a[p, :m] = np.cumsum(d[::-1])[::-1][1:]   # sum_{l>=k} diag(b_l)
-            self.chain_b[p, :m] = np.cumsum(d)[:-1]               # sum_{l<k} diag(b_l)
+        self.coords, self.mask, self.chain_a, self.chain_b, self.lca = pair_paths(
+            np.ascontiguousarray(self.a, dtype=np.int64), np.ascontiguousarray(self.b, dtype=np.int64),
+            self.tree[1], self.tree[2], diag)
         # The largest chain of each side: its first (a's side) or last (b's) joint's.
-        self.reach_a = self.chain_a[:, 0].copy()
-        self.reach_b = self.chain_b.max(axis=1) if M else np.zeros(len(pairs))
+        self.reach_a = self.chain_a.max(axis=1, initial=0.0)
+        self.reach_b = self.chain_b.max(axis=1, initial=0.0)
         self.parents = np.array([model.hinges[h].body_a for h in model.joints], dtype=int)
         self.points = np.array([model.hinges[h].point - model.bodies[model.hinges[h].body_a].flat_position
                                 for h in model.joints]).reshape(-1, 3)
@@ -111,6 +76,68 @@ class PairSpeedBound:
         """
         return _speed_bound(rate_bound, float(h), radii_a, radii_b, np.asarray(rows, dtype=np.int64),
                             self.coords, self.mask, self.chain_a, self.chain_b, self.a, self.b)
+
+
+@njit(cache=True)
+def pair_paths(a, b, parent, joint, diag):
+    """The tree paths of the body pairs (a[p], b[p]), (P,) each, given every
+    body's ``parent`` (-1 for the ground), ``joint`` (the coordinate joining
+    it to its parent) and ``diag`` (its box's diagonal, m).
+
+    The path of a pair is b_0 = a, ..., b_m = b, joint j_k between b_{k-1}
+    and b_k. Returns ``(coords, mask, chain_a, chain_b, lca)``: (P, M) with M
+    the longest path, row p filled to its m: the coordinates of j_1..j_m,
+    1.0, sum_{l >= k} diag(b_l) and sum_{l < k} diag(b_l) (m; each summed
+    from its first body on), and (P,) the lowest common ancestor of a and b.
+    """
+    nb, P = parent.shape[0], a.shape[0]
+    depth = np.zeros(nb, dtype=np.int64)
+    for x in range(nb):
+        y = x
+        while parent[y] >= 0:
+            depth[x] += 1
+            y = parent[y]
+    lca = np.empty(P, dtype=np.int64)
+    M = 0
+    for p in range(P):
+        x, y = a[p], b[p]
+        while depth[x] > depth[y]:
+            x = parent[x]
+        while depth[y] > depth[x]:
+            y = parent[y]
+        while x != y:
+            x, y = parent[x], parent[y]
+        lca[p] = x
+        M = max(M, depth[a[p]] + depth[b[p]] - 2 * depth[x])
+    coords = np.zeros((P, M), dtype=np.int64)
+    mask = np.zeros((P, M))
+    chain_a = np.zeros((P, M))
+    chain_b = np.zeros((P, M))
+    bodies = np.empty(M + 1, dtype=np.int64)
+    for p in range(P):
+        up_a, up_b = depth[a[p]] - depth[lca[p]], depth[b[p]] - depth[lca[p]]
+        m = up_a + up_b
+        x = a[p]
+        for k in range(up_a + 1):   # a up to the common ancestor
+            bodies[k] = x
+            x = parent[x]
+        y = b[p]
+        for k in range(m, up_a, -1):   # b up to just below it, filled from the end
+            bodies[k] = y
+            y = parent[y]
+        for k in range(1, m + 1):
+            # j_k carries the deeper of b_{k-1} and b_k
+            coords[p, k - 1] = joint[bodies[k - 1]] if k <= up_a else joint[bodies[k]]
+            mask[p, k - 1] = 1.0
+        acc = 0.0
+        for k in range(m, 0, -1):
+            acc += diag[bodies[k]]
+            chain_a[p, k - 1] = acc
+        acc = 0.0
+        for k in range(m):
+            acc += diag[bodies[k]]
+            chain_b[p, k] = acc
+    return coords, mask, chain_a, chain_b, lca
 
 
 # The kernels of this module run at every bisection step of the between-sample

@@ -334,13 +334,13 @@ class CollisionMonitor:
         self._geo = (self._packed, self._boxes.half, self._a, self._b, sp.coords, sp.mask, sp.chain_a,
                      sp.chain_b, sp.parents, sp.points, sp.axes, sp.tree, sp.lca, sp.reach_a, sp.reach_b)
         self._stack = stack(16, len(self.pairs), model.n_bodies, model.n_coords)
-        flat = np.zeros(model.n_coords)
-        self._scratch.set_poses(*self._kinematics(flat))
+        self._scratch.set_poses(*self._kinematics(np.zeros(model.n_coords)))
         # A pair whose cheap lower bound exceeds the tolerance cannot touch:
-        # FCL only for the others (the slits' neighbours, ~4 a panel).
+        # FCL only for the others (the slits' neighbours, ~4 a panel), in one batch.
         near = np.flatnonzero(self._scratch.lower_bounds(self.pairs) <= self.collision.tolerance)
         self.flat_contact = np.zeros(len(self.pairs), dtype=bool)
-        self.flat_contact[near] = self._distances_at(flat, near) <= self.collision.tolerance
+        sd = self._scratch.signed_distances(self._a[near], self._b[near])[0]
+        self.flat_contact[near] = sd <= self.collision.tolerance
         self.resting = None
         self._release = np.zeros(len(self.pairs))
         self.package_height = math.nan

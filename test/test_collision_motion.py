@@ -115,7 +115,7 @@ def test_pair_paths_are_the_plain_walk_to_the_bit(sets):
         m = len(coords)
         d = diag[bodies]
         assert list(sp.coords[p, :m]) == coords and sp.lca[p] == common
-        assert np.all(sp.mask[p, :m] == 1.0) and np.all(sp.mask[p, m:] == 0.0)
+        assert sp.length[p] == m and np.all(sp.coords[p, m:] == 0) and np.all(sp.chain_a[p, m:] == 0.0)
         np.testing.assert_array_equal(sp.chain_a[p, :m], np.cumsum(d[::-1])[::-1][1:])
         np.testing.assert_array_equal(sp.chain_b[p, :m], np.cumsum(d)[:-1])
         assert sp.reach_a[p] == sp.chain_a[p, 0] and sp.reach_b[p] == sp.chain_b[p, m - 1]

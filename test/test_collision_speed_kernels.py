@@ -110,7 +110,7 @@ def test_radii_where_needed_are_the_full_table_to_the_bit(paper_run):
     for R, p in random_poses(model, 10, 4):
         full = sp.radii(R, p)
         rows = np.sort(rng.choice(len(mon.pairs), 5, replace=False)).astype(np.int64)
-        need = needed_radii(rows, sp.coords, sp.mask, mon._a, mon._b, len(R), model.n_coords)
+        need = needed_radii(rows, sp.coords, sp.length, mon._a, mon._b, len(R), model.n_coords)
         some = hinge_radii_of(R, p, sp.half, sp.parents, sp.points, sp.axes, need)
         np.testing.assert_array_equal(some[need], full[need])
         assert np.all(some[~need] == 0.0)
@@ -282,7 +282,7 @@ def test_speed_caps_are_at_least_the_speed_bound(paper_run, array_6x6_run, case)
         seg = HermiteSegment(0.0, theta[0], omega[0], h, theta[1], omega[1])
         radii = [sp.radii(*mon._kinematics(th)) for th in theta]
         w = seg.rate_bound(0.0, h)
-        L = _speed_bound(w, h, radii[0], radii[1], rows, sp.coords, sp.mask, sp.chain_a, sp.chain_b, sp.a, sp.b)
+        L = _speed_bound(w, h, radii[0], radii[1], rows, sp.coords, sp.length, sp.chain_a, sp.chain_b, sp.a, sp.b)
         cap = speed_caps(w, h, radii[0], radii[1], rows, sp.tree, sp.lca, sp.reach_a, sp.reach_b, mon._a, mon._b)
         assert np.all(cap >= L)
         closed += int(np.count_nonzero(cap < 3.0 * L))

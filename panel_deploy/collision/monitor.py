@@ -331,7 +331,7 @@ class CollisionMonitor:
         self._scratch = BoxSet(model)
         self._speed = PairSpeedBound(model, self.pairs)
         sp = self._speed
-        self._geo = (self._packed, self._boxes.half, self._a, self._b, sp.coords, sp.mask, sp.chain_a,
+        self._geo = (self._packed, self._boxes.half, self._a, self._b, sp.coords, sp.length, sp.chain_a,
                      sp.chain_b, sp.parents, sp.points, sp.axes, sp.tree, sp.lca, sp.reach_a, sp.reach_b)
         self._stack = stack(16, len(self.pairs), model.n_bodies, model.n_coords)
         self._scratch.set_poses(*self._kinematics(np.zeros(model.n_coords)))

@@ -47,7 +47,7 @@ class PairSpeedBound:
         # coordinate joining each to its parent, parents first.
         self.tree = (np.array(model.order, dtype=np.int64), np.array(model.parent, dtype=np.int64),
                      np.array(model.body_joint, dtype=np.int64))
-        self.coords, self.mask, self.chain_a, self.chain_b, self.lca = pair_paths(
+        self.coords, self.length, self.chain_a, self.chain_b, self.lca = pair_paths(
             np.ascontiguousarray(self.a, dtype=np.int64), np.ascontiguousarray(self.b, dtype=np.int64),
             self.tree[1], self.tree[2], diag)
         # The largest chain of each side: its first (a's side) or last (b's) joint's.
@@ -75,7 +75,7 @@ class PairSpeedBound:
         the chain radius.
         """
         return _speed_bound(rate_bound, float(h), radii_a, radii_b, np.asarray(rows, dtype=np.int64),
-                            self.coords, self.mask, self.chain_a, self.chain_b, self.a, self.b)
+                            self.coords, self.length, self.chain_a, self.chain_b, self.a, self.b)
 
 
 @njit(cache=True)
@@ -85,10 +85,11 @@ def pair_paths(a, b, parent, joint, diag):
     it to its parent) and ``diag`` (its box's diagonal, m).
 
     The path of a pair is b_0 = a, ..., b_m = b, joint j_k between b_{k-1}
-    and b_k. Returns ``(coords, mask, chain_a, chain_b, lca)``: (P, M) with M
-    the longest path, row p filled to its m: the coordinates of j_1..j_m,
-    1.0, sum_{l >= k} diag(b_l) and sum_{l < k} diag(b_l) (m; each summed
-    from its first body on), and (P,) the lowest common ancestor of a and b.
+    and b_k. Returns ``(coords, length, chain_a, chain_b, lca)``: (P, M)
+    with M the longest path, row p filled to its m (zeros after): the
+    coordinates of j_1..j_m; (P,) m; (P, M) sum_{l >= k} diag(b_l) and
+    sum_{l < k} diag(b_l) (m; each summed from its first body on); and (P,)
+    the lowest common ancestor of a and b.
     """
     nb, P = parent.shape[0], a.shape[0]
     depth = np.zeros(nb, dtype=np.int64)
@@ -110,13 +111,14 @@ def pair_paths(a, b, parent, joint, diag):
         lca[p] = x
         M = max(M, depth[a[p]] + depth[b[p]] - 2 * depth[x])
     coords = np.zeros((P, M), dtype=np.int64)
-    mask = np.zeros((P, M))
+    length = np.empty(P, dtype=np.int64)
     chain_a = np.zeros((P, M))
     chain_b = np.zeros((P, M))
     bodies = np.empty(M + 1, dtype=np.int64)
     for p in range(P):
         up_a, up_b = depth[a[p]] - depth[lca[p]], depth[b[p]] - depth[lca[p]]
         m = up_a + up_b
+        length[p] = m
         x = a[p]
         for k in range(up_a + 1):   # a up to the common ancestor
             bodies[k] = x
@@ -128,7 +130,6 @@ def pair_paths(a, b, parent, joint, diag):
         for k in range(1, m + 1):
             # j_k carries the deeper of b_{k-1} and b_k
             coords[p, k - 1] = joint[bodies[k - 1]] if k <= up_a else joint[bodies[k]]
-            mask[p, k - 1] = 1.0
         acc = 0.0
         for k in range(m, 0, -1):
             acc += diag[bodies[k]]
@@ -137,7 +138,7 @@ def pair_paths(a, b, parent, joint, diag):
         for k in range(m):
             acc += diag[bodies[k]]
             chain_b[p, k] = acc
-    return coords, mask, chain_a, chain_b, lca
+    return coords, length, chain_a, chain_b, lca
 
 
 # The kernels of this module run at every bisection step of the between-sample
@@ -191,41 +192,39 @@ def hinge_radii_of(rotation, position, half, parents, points, axes, need):
 
 
 @njit(cache=True)
-def needed_radii(rows, coords, mask, a, b, nb, n):
+def needed_radii(rows, coords, length, a, b, nb, n):
     """The (body, coordinate) entries, (nb, n) bool, of the radii that
     :func:`_speed_bound` reads for the pairs ``rows``."""
     need = np.zeros((nb, n), dtype=np.bool_)
     for i in range(rows.shape[0]):
         p = rows[i]
-        for k in range(coords.shape[1]):
-            if mask[p, k] != 0.0:
-                need[a[p], coords[p, k]] = True
-                need[b[p], coords[p, k]] = True
+        for k in range(length[p]):
+            need[a[p], coords[p, k]] = True
+            need[b[p], coords[p, k]] = True
     return need
 
 
 @njit(cache=True)
-def _speed_bound(rate_bound, h, radii_a, radii_b, rows, coords, mask, chain_a, chain_b, a, b):
+def _speed_bound(rate_bound, h, radii_a, radii_b, rows, coords, length, chain_a, chain_b, a, b):
     """:meth:`PairSpeedBound.__call__` (same arguments and units), one pair at a time.
 
     Seen from body a the joints beyond k move b's points; seen from b, those
     before k move a's. The chain bound Lambda_k sums w_l chain_l over those
     joints (suffix from a's side, prefix from b's)."""
-    M = coords.shape[1]
     out = np.empty(rows.shape[0])
     for i in range(rows.shape[0]):
         p = rows[i]
         beyond, total_a = 0.0, 0.0
-        for k in range(M - 1, -1, -1):
+        for k in range(length[p] - 1, -1, -1):
             c = coords[p, k]
-            w = rate_bound[c] * mask[p, k]
+            w = rate_bound[c]
             rho = (radii_a[b[p], c] + radii_b[b[p], c] + h * beyond) / 2.0
             total_a += w * min(rho, chain_a[p, k])
             beyond += w * chain_a[p, k]
         before, total_b = 0.0, 0.0
-        for k in range(M):
+        for k in range(length[p]):
             c = coords[p, k]
-            w = rate_bound[c] * mask[p, k]
+            w = rate_bound[c]
             rho = (radii_a[a[p], c] + radii_b[a[p], c] + h * before) / 2.0
             total_b += w * min(rho, chain_b[p, k])
             before += w * chain_b[p, k]

@@ -19,7 +19,7 @@ recompiles it on a first run (seconds each).
 
 Arguments shared by the kernels (tuples, so that numba specialises once):
 
-``geo`` = ``(P, half, pa, pb, coords, mask, chain_a, chain_b, parents, points, axes, tree, lca, reach_a, reach_b)``
+``geo`` = ``(P, half, pa, pb, coords, length, chain_a, chain_b, parents, points, axes, tree, lca, reach_a, reach_b)``
     ``P`` :func:`~panel_deploy.dynamics.pack.pack` of the model, ``half``
     (nb, 3) the boxes' half edges (m), ``pa``, ``pb`` (P,) the pairs' bodies,
     then :class:`.motion.PairSpeedBound`'s tables.
@@ -127,7 +127,7 @@ def refine_interval(geo, seg, lim, t1, D0, D1, radii0, radii1, colliding, work):
     at least the bound, a pair it closes the bound closes too, so the
     search, its distances and what it finds are the same to the bit.
     """
-    _, half, pa, pb, coords, mask, chain_a, chain_b, parents, points, axes, tree, lca, reach_a, reach_b = geo
+    _, half, pa, pb, coords, length, chain_a, chain_b, parents, points, axes, tree, lca, reach_a, reach_b = geo
     t0, h, _, A, B, C = seg
     threshold, resolution, time_resolution, prune = lim
     t_at, S_at, R_at, frame, given = work
@@ -204,7 +204,7 @@ def refine_interval(geo, seg, lim, t1, D0, D1, radii0, radii1, colliding, work):
                     kept[n_kept] = k
                     n_kept += 1
             sub = kept[:n_kept]
-        L = _speed_bound(w, b - a, R_at[lo], R_at[hi], sub, coords, mask, chain_a, chain_b, pa, pb)
+        L = _speed_bound(w, b - a, R_at[lo], R_at[hi], sub, coords, length, chain_a, chain_b, pa, pb)
         n_open = 0
         for i in range(sub.shape[0]):
             k = sub[i]
@@ -229,7 +229,7 @@ def refine_interval(geo, seg, lim, t1, D0, D1, radii0, radii1, colliding, work):
         m = 0.5 * (a + b)
         R, p = poses(geo, seg, m)
         _distances(geo, R, p, sub, S_at[slot])
-        radii = hinge_radii_of(R, p, half, parents, points, axes, needed_radii(sub, coords, mask, pa, pb, nb, n))
+        radii = hinge_radii_of(R, p, half, parents, points, axes, needed_radii(sub, coords, length, pa, pb, nb, n))
         for x in range(nb):
             for c in range(n):
                 R_at[slot, x, c] = radii[x, c]

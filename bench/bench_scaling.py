@@ -6,7 +6,8 @@ Scenes: the paper's 4 x 4 scene as it is, and the first circuit that packs of
 5 x 6, 6 x 6, 8 x 8 and 10 x 10, as issue 33 measured them
 (``--set array.rows=R --set array.cols=C --set fold.circuit=N
 --set fold.ground=null`` on the paper scene), each over a short window
-(``T_END``: the large ones collide or press in the stack within 0.02-0.06 s
+(``CASES``: 0.5 s for the paper scene, 0.2 s for 5 x 6 and 6 x 6, 0.1 s for
+8 x 8 and 10 x 10, which collide or press in the stack within 0.02-0.06 s
 and take seconds per simulated 0.1 s), sampled every 5 ms as the scene.
 
 Per scene (medians of ``--repeats`` runs, wall clock, 2 shared cores):
@@ -14,10 +15,11 @@ Per scene (medians of ``--repeats`` runs, wall clock, 2 shared cores):
 - collision check, as production runs it (refinement on, up to and with the
   sample of the first collision): set-up of the check (once per run), and
   the median time per sample of :meth:`TrajectoryCheck.update` over all
-  repeats, with the between-sample screen off ("before", ``prune=False``:
-  every pair's speed bound on every interval) and on ("after"), the two
-  checks fed the same samples in turn, and the median of their per-sample
-  ratios; their results are compared (first collision, t, v, d, D_j);
+  repeats (at least ``--repeats``, and enough for ``MIN_SAMPLES`` samples),
+  with the between-sample screen off ("before", ``prune=False``: every
+  pair's speed bound on every interval) and on ("after"), the two checks
+  fed the same samples in turn, and the median of their per-sample ratios;
+  their results are compared (first collision, t, v, d, D_j);
 - the paper's D_j alone (refinement off) per sample, over the whole window;
 - P, the body pairs checked, and how many got an exact distance per sample.
 
@@ -29,6 +31,7 @@ to ``--out``.
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import time
 from pathlib import Path
@@ -46,6 +49,8 @@ SCENE = ROOT / "config" / "scenes" / "paper_4x4.yaml"
 #: (rows, cols, simulated window in s); None: the paper scene as it is.
 CASES = ((None, None, 0.5), (5, 6, 0.2), (6, 6, 0.2), (8, 8, 0.1), (10, 10, 0.1))
 SAMPLE_INTERVAL = 0.005
+#: Timed samples per check setting at least (a 10 x 10 check stops after 6 samples).
+MIN_SAMPLES = 200
 
 
 def first_packing(rows: int, cols: int) -> int:
@@ -110,9 +115,10 @@ def measure(rows, cols, t_end, repeats):
     result = runs[0]
     wall = statistics.median(r.wall_time for r in runs)
     collisions = [CollisionSettings.from_scene(scene, prune=prune) for prune in (False, True)]
-    lockstep(model, result, collisions)  # compile / warm up
+    checked = len(lockstep(model, result, collisions)[0][1])  # and compile / warm up
     setup, before, after, ratio = [], [], [], []
-    for _ in range(repeats):
+    # A check is cheap next to the simulation: enough repeats for MIN_SAMPLES timed samples.
+    for _ in range(max(repeats, math.ceil(MIN_SAMPLES / checked))):
         (_, t_off, off), (s_on, t_on, on) = lockstep(model, result, collisions)
         setup.append(s_on)
         before += t_off

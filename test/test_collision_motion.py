@@ -3,7 +3,8 @@
 The radii are checked against the point-to-line distance |r x u| of every
 corner, the rate bound against a dense grid of scipy's Hermite spline, and
 the pair speed bound against finite differences of the exact signed distance
-along random motions of the paper's design: it must never be exceeded.
+along random motions of the paper's design: it must never be exceeded. The
+pairs' tree paths, compiled, are a plain walk up the tree's to the bit.
 """
 
 import math
@@ -87,3 +88,35 @@ def test_pair_speed_bound_is_never_exceeded_along_random_motions(paper):
         assert np.all(rate <= L * (1 + 1e-9) + 1e-12)
         ratios.append((rate / L).max())
     assert max(ratios) > 0.1
+
+
+def plain_path(model, a, b):
+    """Bodies b_0 = a .. b_m = b and the coordinates of the joints between them, by lists."""
+    def up(x):
+        chain = [x]
+        while model.parent[chain[-1]] >= 0:
+            chain.append(model.parent[chain[-1]])
+        return chain
+
+    ua, ub = up(a), up(b)
+    common = next(x for x in ua if x in set(ub))
+    side_a, side_b = ua[:ua.index(common) + 1], ub[:ub.index(common)][::-1]
+    coords = [model.body_joint[x] for x in side_a[:-1]] + [model.body_joint[x] for x in side_b]
+    return side_a + side_b, coords, common
+
+
+@pytest.mark.parametrize("sets", [[], ["array.rows=10", "array.cols=10", "fold.circuit=8", "fold.ground=null"]])
+def test_pair_paths_are_the_plain_walk_to_the_bit(sets):
+    model = build_model(load_scene(resolve_scene("paper_4x4"), sets))
+    sp = PairSpeedBound(model, model.collision_pairs)
+    diag = 2.0 * np.linalg.norm(sp.half, axis=1)
+    for p, (a, b) in enumerate(model.collision_pairs):
+        bodies, coords, common = plain_path(model, a, b)
+        m = len(coords)
+        d = diag[bodies]
+        assert list(sp.coords[p, :m]) == coords and sp.lca[p] == common
+        assert sp.length[p] == m and np.all(sp.coords[p, m:] == 0) and np.all(sp.chain_a[p, m:] == 0.0)
+        np.testing.assert_array_equal(sp.chain_a[p, :m], np.cumsum(d[::-1])[::-1][1:])
+        np.testing.assert_array_equal(sp.chain_b[p, :m], np.cumsum(d)[:-1])
+        assert sp.reach_a[p] == sp.chain_a[p, 0] and sp.reach_b[p] == sp.chain_b[p, m - 1]
+    assert not sets or sp.coords.shape[1] > 10   # long paths on the large array

@@ -1,11 +1,13 @@
 """The collision monitor's compiled fast paths against the plain rules they replace.
 
 The sample distances come from one FCL batch chosen by a compiled plan, the
-between-sample search is one compiled call, box_distance prunes edge pairs
-and the hinge-line radii are computed where they are read. Each must give
-what the plain form gives: the sample distances and the search's events and
-counters to the bit (against the per-pair loop and the Python recursion the
-monitor ran before), the pruned enumeration a lower bound it relies on.
+between-sample search is one compiled call that screens each interval's pairs
+by an O(1) speed cap, box_distance prunes edge pairs and the hinge-line radii
+are computed where they are read. Each must give what the plain form gives:
+the sample distances and the search's events and counters to the bit
+(against the per-pair loop and the Python recursion the monitor ran before,
+and the check with the screen against the check without it), the pruned
+enumeration a lower bound it relies on, the cap at least the bound.
 """
 
 import math
@@ -15,12 +17,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from panel_deploy import fold
 from panel_deploy.build import build_model
-from panel_deploy.collision import CollisionMonitor, CollisionSettings
+from panel_deploy.collision import CollisionMonitor, CollisionSettings, check_trajectory
 from panel_deploy.collision.geometry import (CERTIFY_TOL, BoxSet, _clamp_to_box, _corners, _edge_gaps, _EDGES,
-                                             box_distance, box_signed_distance, least_overlap, pair_bounds)
+                                             box_distance, box_signed_distance, corner_bound, least_overlap,
+                                             pair_bounds)
 from panel_deploy.collision.monitor import _segment
-from panel_deploy.collision.motion import hinge_radii_of, needed_radii
+from panel_deploy.collision.motion import HermiteSegment, _speed_bound, hinge_radii_of, needed_radii, speed_caps
 from panel_deploy.dynamics import simulate
 from panel_deploy.scene import load_scene, resolve_scene
 
@@ -106,7 +110,7 @@ def test_radii_where_needed_are_the_full_table_to_the_bit(paper_run):
     for R, p in random_poses(model, 10, 4):
         full = sp.radii(R, p)
         rows = np.sort(rng.choice(len(mon.pairs), 5, replace=False)).astype(np.int64)
-        need = needed_radii(rows, sp.coords, sp.mask, mon._a, mon._b, len(R), model.n_coords)
+        need = needed_radii(rows, sp.coords, sp.length, mon._a, mon._b, len(R), model.n_coords)
         some = hinge_radii_of(R, p, sp.half, sp.parents, sp.points, sp.axes, need)
         np.testing.assert_array_equal(some[need], full[need])
         assert np.all(some[~need] == 0.0)
@@ -248,3 +252,62 @@ def test_compiled_search_takes_the_python_search_steps(paper_run, deep):
     assert fast.counters["refine_evaluations"] > 100
     assert any(e.refined and e.contact_time is not None for e in fast.events)
     assert (len(fast._stack[3]) > 16) == deep
+
+
+@pytest.fixture(scope="module")
+def array_6x6_run():
+    """6 x 6, first circuit that packs, as issue 33 ran it, for 0.1 s: it
+    "collides" (panels pressing in the stack) at 0.042 s."""
+    first = next(i for i, d in fold.designs(6, 6) if d.stowed is not None)
+    scene = load_scene(resolve_scene("paper_4x4"), ["array.rows=6", "array.cols=6", f"fold.circuit={first}",
+                                                    "fold.ground=null", "simulation.t_end=0.1",
+                                                    "simulation.samples=21"])
+    model = build_model(scene)
+    return model, simulate(model, scene.simulation)
+
+
+@pytest.mark.parametrize("case", ["paper", "6x6"])
+def test_speed_caps_are_at_least_the_speed_bound(paper_run, array_6x6_run, case):
+    # The screen closes a pair only if the bound would: the cap must not be
+    # below the bound for any pair, on random intervals between random states.
+    model, _ = paper_run if case == "paper" else array_6x6_run
+    mon = CollisionMonitor(model)
+    sp, rng = mon._speed, np.random.default_rng(11)
+    rows = np.arange(len(mon.pairs), dtype=np.int64)
+    closed = 0
+    for _ in range(10):
+        theta = rng.uniform(0.0, math.pi, (2, model.n_coords))
+        omega = rng.normal(0.0, 10.0, (2, model.n_coords))
+        h = rng.uniform(1e-4, 1e-2)
+        seg = HermiteSegment(0.0, theta[0], omega[0], h, theta[1], omega[1])
+        radii = [sp.radii(*mon._kinematics(th)) for th in theta]
+        w = seg.rate_bound(0.0, h)
+        L = _speed_bound(w, h, radii[0], radii[1], rows, sp.coords, sp.length, sp.chain_a, sp.chain_b, sp.a, sp.b)
+        cap = speed_caps(w, h, radii[0], radii[1], rows, sp.tree, sp.lca, sp.reach_a, sp.reach_b, mon._a, mon._b)
+        assert np.all(cap >= L)
+        closed += int(np.count_nonzero(cap < 3.0 * L))
+    assert closed > len(rows)   # and near it for many pairs, or it would screen nothing
+
+
+def test_corner_bound_is_within_the_smaller_circumradius_of_the_centres():
+    # What lets a resting pair skip its corners (monitor._sample_plan).
+    for ha, Ra, ca, hb, Rb, cb in separated_pairs(np.random.default_rng(12)):
+        R, c, h = np.array([Ra, Rb]), np.array([ca, cb]), np.array([ha, hb])
+        reach = min(np.linalg.norm(ha), np.linalg.norm(hb)) + np.linalg.norm(cb - ca)
+        assert corner_bound(R, c, h, 0, 1) <= reach + 1e-12
+
+
+@pytest.mark.parametrize("case", ["paper", "6x6"])
+def test_screened_check_is_the_unscreened_one(paper_run, array_6x6_run, case):
+    model, run = paper_run if case == "paper" else array_6x6_run
+    screened, plain = (check_trajectory(model, run, CollisionSettings(prune=prune)) for prune in (True, False))
+    a, b = screened.first_collision, plain.first_collision
+    assert a is not None and (a.pair, a.contact_time, a.refined) == (b.pair, b.contact_time, b.refined)
+    for x, y in ((a.t, b.t), (screened.v, plain.v), (screened.d, plain.d), (a.normal_speed, b.normal_speed)):
+        assert abs(x - y) <= 1e-12
+    assert screened.d_pair == plain.d_pair and screened.d_time == plain.d_time
+    assert [e.pair for e in screened.events] == [e.pair for e in plain.events]
+    np.testing.assert_allclose(screened.distances, plain.distances, rtol=0.0, atol=1e-12)
+    np.testing.assert_array_equal(screened.exact, plain.exact)
+    assert screened.counters == plain.counters
+    assert screened.counters["refine_evaluations"] > 100

@@ -316,14 +316,15 @@ def pair_bounds(R, c, h, a, b):
     overlap = np.empty(len(a))
     upper = np.empty(len(a))
     for k in range(len(a)):
-        overlap[k], upper[k] = pair_bound(R, c, h, a[k], b[k])
+        i, j = a[k], b[k]
+        overlap[k] = least_overlap(R[i], c[i], h[i], R[j], c[j], h[j])[0]
+        upper[k] = corner_bound(R, c, h, i, j)
     return overlap, upper
 
 
 @njit(cache=True)
-def pair_bound(R, c, h, i, j):
-    """:func:`pair_bounds` of the one pair of boxes i and j: ``(overlap, upper)``, m."""
-    overlap = least_overlap(R[i], c[i], h[i], R[j], c[j], h[j])[0]
+def corner_bound(R, c, h, i, j):
+    """:func:`pair_bounds`' ``upper`` of the one pair of boxes i and j, m."""
     q = np.empty(3)
     best = np.inf
     for x, y in ((i, j), (j, i)):
@@ -331,7 +332,7 @@ def pair_bound(R, c, h, i, j):
         for m in range(8):
             _clamp_to_box(corners[m], R[y], c[y], h[y], q)
             best = min(best, _distance(corners[m], q))
-    return overlap, best
+    return best
 
 
 @njit(cache=True)

@@ -19,14 +19,16 @@ recompiles it on a first run (seconds each).
 
 Arguments shared by the kernels (tuples, so that numba specialises once):
 
-``geo`` = ``(P, half, pa, pb, coords, mask, chain_a, chain_b, parents, points, axes)``
+``geo`` = ``(P, half, pa, pb, coords, length, chain_a, chain_b, parents, points, axes, tree, lca, reach_a, reach_b)``
     ``P`` :func:`~panel_deploy.dynamics.pack.pack` of the model, ``half``
     (nb, 3) the boxes' half edges (m), ``pa``, ``pb`` (P,) the pairs' bodies,
     then :class:`.motion.PairSpeedBound`'s tables.
 ``seg`` = ``(t0, h, theta0, A, B, C)``
     :attr:`.motion.HermiteSegment.coefficients`.
-``lim`` = ``(threshold, resolution, time_resolution)``
-    -tolerance (m), the depth slack (m) and the time resolution (s).
+``lim`` = ``(threshold, resolution, time_resolution, prune)``
+    -tolerance (m), the depth slack (m), the time resolution (s), and
+    whether the whole interval's pairs are first screened by
+    :func:`.motion.speed_caps` (:func:`refine_interval`).
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from numba import njit
 
 from ..dynamics.kernels import body_states
 from .geometry import box_signed_distance
-from .motion import _rate_bound, _speed_bound, hinge_radii_of, needed_radii
+from .motion import _rate_bound, _speed_bound, hinge_radii_of, needed_radii, speed_caps
 
 # Columns of the search's stack frames (refine_interval): the slots of a node's
 # ends, its stage, and how many pairs it bounds.
@@ -117,10 +119,17 @@ def refine_interval(geo, seg, lim, t1, D0, D1, radii0, radii1, colliding, work):
     (they crossed the tolerance in (t_0, mid-point]); the bisection steps and
     whether the touching pairs were checked at the mid-point. ``steps`` is
     -1 when the search needed a deeper ``work``; then nothing else holds.
+
+    Broad phase (``prune``): on the whole interval, most pairs are far
+    apart and close at once, yet their speed bound costs O(path length)
+    each, O(n^3) in all for n panels. There a pair is bounded only if
+    :func:`.motion.speed_caps` (O(1) a pair) leaves it open; as the cap is
+    at least the bound, a pair it closes the bound closes too, so the
+    search, its distances and what it finds are the same to the bit.
     """
-    _, half, pa, pb, coords, mask, chain_a, chain_b, parents, points, axes = geo
+    _, half, pa, pb, coords, length, chain_a, chain_b, parents, points, axes, tree, lca, reach_a, reach_b = geo
     t0, h, _, A, B, C = seg
-    threshold, resolution, time_resolution = lim
+    threshold, resolution, time_resolution, prune = lim
     t_at, S_at, R_at, frame, given = work
     n_pairs = D0.shape[0]
     found_t = np.full(n_pairs, np.nan)
@@ -183,8 +192,19 @@ def refine_interval(geo, seg, lim, t1, D0, D1, radii0, radii1, colliding, work):
             continue
         a, b = t_at[lo], t_at[hi]
         sub = given[d, :frame[d, COUNT]]
-        L = _speed_bound(_rate_bound(A, B, C, (a - t0) / h, (b - t0) / h, h), b - a, R_at[lo], R_at[hi],
-                         sub, coords, mask, chain_a, chain_b, pa, pb)
+        w = _rate_bound(A, B, C, (a - t0) / h, (b - t0) / h, h)
+        if prune and d == 0:
+            # Only the samples' radii tables are full, as the caps need.
+            cap = speed_caps(w, b - a, R_at[lo], R_at[hi], sub, tree, lca, reach_a, reach_b, pa, pb)
+            kept = np.empty(sub.shape[0], dtype=np.int64)
+            n_kept = 0
+            for i in range(sub.shape[0]):
+                k = sub[i]
+                if (S_at[lo, k] + S_at[hi, k] - cap[i] * (b - a)) / 2.0 < threshold - resolution:
+                    kept[n_kept] = k
+                    n_kept += 1
+            sub = kept[:n_kept]
+        L = _speed_bound(w, b - a, R_at[lo], R_at[hi], sub, coords, length, chain_a, chain_b, pa, pb)
         n_open = 0
         for i in range(sub.shape[0]):
             k = sub[i]
@@ -209,7 +229,7 @@ def refine_interval(geo, seg, lim, t1, D0, D1, radii0, radii1, colliding, work):
         m = 0.5 * (a + b)
         R, p = poses(geo, seg, m)
         _distances(geo, R, p, sub, S_at[slot])
-        radii = hinge_radii_of(R, p, half, parents, points, axes, needed_radii(sub, coords, mask, pa, pb, nb, n))
+        radii = hinge_radii_of(R, p, half, parents, points, axes, needed_radii(sub, coords, length, pa, pb, nb, n))
         for x in range(nb):
             for c in range(n):
                 R_at[slot, x, c] = radii[x, c]

@@ -1,0 +1,181 @@
+"""How the simulation and the collision check grow with the array (issue 33).
+
+    python bench/bench_scaling.py [--repeats N] [--out bench/results/scaling.txt]
+
+Scenes: the paper's 4 x 4 scene as it is, and the first circuit that packs of
+5 x 6, 6 x 6, 8 x 8 and 10 x 10, as issue 33 measured them
+(``--set array.rows=R --set array.cols=C --set fold.circuit=N
+--set fold.ground=null`` on the paper scene), each over a short window
+(``CASES``: 0.5 s for the paper scene, 0.2 s for 5 x 6 and 6 x 6, 0.1 s for
+8 x 8 and 10 x 10, which collide or press in the stack within 0.02-0.06 s
+and take seconds per simulated 0.1 s), sampled every 5 ms as the scene.
+
+Per scene (medians of ``--repeats`` runs, wall clock, 2 shared cores):
+- simulation: wall time per simulated second and per accepted step;
+- collision check, as production runs it (refinement on, up to and with the
+  sample of the first collision): set-up of the check (once per run), and
+  the median time per sample of :meth:`TrajectoryCheck.update` over all
+  repeats (at least ``--repeats``, and enough for ``MIN_SAMPLES`` samples),
+  with the between-sample screen off ("before", ``prune=False``: every
+  pair's speed bound on every interval) and on ("after"), the two checks
+  fed the same samples in turn, and the median of their per-sample ratios;
+  their results are compared (first collision, t, v, d, D_j);
+- the paper's D_j alone (refinement off) per sample, over the whole window;
+- P, the body pairs checked, and how many got an exact distance per sample.
+
+Then the exponent of each figure against n, the number of bodies, by least
+squares on log-log over the five scenes. Everything printed is also written
+to ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+
+from panel_deploy import fold
+from panel_deploy.build import build_model
+from panel_deploy.collision import CollisionSettings, TrajectoryCheck
+from panel_deploy.dynamics import simulate
+from panel_deploy.scene import load_scene
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENE = ROOT / "config" / "scenes" / "paper_4x4.yaml"
+#: (rows, cols, simulated window in s); None: the paper scene as it is.
+CASES = ((None, None, 0.5), (5, 6, 0.2), (6, 6, 0.2), (8, 8, 0.1), (10, 10, 0.1))
+SAMPLE_INTERVAL = 0.005
+#: Timed samples per check setting at least (a 10 x 10 check stops after 6 samples).
+MIN_SAMPLES = 200
+
+
+def first_packing(rows: int, cols: int) -> int:
+    """Index of the first circuit of an R x C array that packs into two stacks."""
+    return next(i for i, d in fold.designs(rows, cols) if d.stowed is not None)
+
+
+def scene_of(rows, cols, t_end):
+    """The scene of one case and its label."""
+    samples = [f"simulation.t_end={t_end}", f"simulation.samples={round(t_end / SAMPLE_INTERVAL) + 1}"]
+    if rows is None:
+        return load_scene(SCENE, samples), "4 x 4 paper"
+    n = first_packing(rows, cols)
+    sets = [f"array.rows={rows}", f"array.cols={cols}", f"fold.circuit={n}", "fold.ground=null"]
+    return load_scene(SCENE, sets + samples), f"{rows} x {cols} circuit {n}"
+
+
+def lockstep(model, result, collisions):
+    """Check ``result`` with every setting of ``collisions`` at once, sample by
+    sample, the order turned at each sample, up to and with the sample of the
+    first collision: (set-up s, per-sample update times s, check) of each."""
+    out = []
+    for collision in collisions:
+        t0 = time.perf_counter()
+        check = TrajectoryCheck(model, collision, capacity=len(result.t))
+        out.append((time.perf_counter() - t0, [], check))
+    for j in range(len(result.t)):
+        if out[0][2].collided:
+            break
+        for _, times, check in out[::1 if j % 2 else -1]:
+            t0 = time.perf_counter()
+            check.update(result.t[j], result.theta[j], result.omega[j], (result.rotation[j], result.position[j]))
+            times.append(time.perf_counter() - t0)
+    return out
+
+
+def d_j_per_sample(model, result, collision):
+    """Median time (s) per sample of D_j alone (no refinement), every sample."""
+    check = TrajectoryCheck(model, collision, capacity=len(result.t))
+    times = []
+    for j in range(len(result.t)):
+        t0 = time.perf_counter()
+        check.update(result.t[j], result.theta[j], result.omega[j], (result.rotation[j], result.position[j]))
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def same(a, b) -> bool:
+    """Whether two checks found the same: first collision, t, v, d and D_j."""
+    ra, rb = a.report(), b.report()
+    ea, eb = ra.first_collision, rb.first_collision
+    if (ea is None) != (eb is None):
+        return False
+    events = ea is None or (ea.pair == eb.pair and ea.t == eb.t)
+    return events and ra.v == rb.v and ra.d == rb.d and np.array_equal(ra.distances, rb.distances)
+
+
+def measure(rows, cols, t_end, repeats):
+    scene, label = scene_of(rows, cols, t_end)
+    model = build_model(scene)
+    runs = [simulate(model, scene.simulation) for _ in range(repeats)]
+    result = runs[0]
+    wall = statistics.median(r.wall_time for r in runs)
+    collisions = [CollisionSettings.from_scene(scene, prune=prune) for prune in (False, True)]
+    checked = len(lockstep(model, result, collisions)[0][1])  # and compile / warm up
+    setup, before, after, ratio = [], [], [], []
+    # A check is cheap next to the simulation: enough repeats for MIN_SAMPLES timed samples.
+    for _ in range(max(repeats, math.ceil(MIN_SAMPLES / checked))):
+        (_, t_off, off), (s_on, t_on, on) = lockstep(model, result, collisions)
+        setup.append(s_on)
+        before += t_off
+        after += t_on
+        ratio += [x / y for x, y in zip(t_off, t_on)]
+    refine_off = CollisionSettings.from_scene(scene, refine=False)
+    dj = statistics.median(d_j_per_sample(model, result, refine_off) for _ in range(repeats))
+    report = on.report()
+    return dict(
+        label=label, bodies=model.n_bodies, joints=model.n_coords, pairs=len(model.collision_pairs),
+        t_end=t_end, steps=result.nsteps, sim_per_s=wall / result.t[-1], per_step=wall / result.nsteps,
+        setup=statistics.median(setup), before=statistics.median(before), after=statistics.median(after),
+        ratio=statistics.median(ratio), dj=dj,
+        exact=report.counters["exact_pairs"] / report.counters["samples"], checked=report.counters["samples"],
+        identical=same(off, on),
+        outcome=(f"collision {report.first_collision.t:.4f} s" if report.collided else "no collision"))
+
+
+def exponent(n, y) -> float:
+    """Slope of log y against log n, least squares."""
+    return float(np.polyfit(np.log(n), np.log(y), 1)[0])
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "scaling.txt")
+    args = ap.parse_args(argv)
+    start = time.perf_counter()
+    rows = [measure(r, c, t, args.repeats) for r, c, t in CASES]
+    lines = [f"bench_scaling: medians of {args.repeats} runs, 2 shared cores, load average "
+             f"{open('/proc/loadavg').read().split()[0]}; n = bodies (after merging); "
+             f"check times per sample up to the first collision, refinement on",
+             "",
+             f"{'scene':22s} {'n':>3s} {'joints':>6s} {'pairs':>5s} {'t_end':>5s} {'steps':>6s} "
+             f"{'sim s/s':>8s} {'us/step':>8s} {'setup ms':>8s} {'before ms':>9s} {'after ms':>8s} "
+             f"{'D_j ms':>7s} {'exact':>6s} {'same':>5s}  outcome"]
+    for x in rows:
+        lines.append(f"{x['label']:22s} {x['bodies']:3d} {x['joints']:6d} {x['pairs']:5d} {x['t_end']:5.2f} "
+                     f"{x['steps']:6d} {x['sim_per_s']:8.2f} {x['per_step'] * 1e6:8.1f} "
+                     f"{x['setup'] * 1e3:8.1f} {x['before'] * 1e3:9.3f} {x['after'] * 1e3:8.3f} "
+                     f"{x['dj'] * 1e3:7.3f} {x['exact']:6.1f} {str(x['identical']):>5s}  "
+                     f"{x['outcome']} ({x['checked']} samples checked)")
+    n = np.array([x["bodies"] for x in rows], dtype=float)
+    lines += ["", "exponent against n (bodies), least squares on log-log over the five scenes:"]
+    for key, name in (("pairs", "pairs P"), ("sim_per_s", "simulation, wall s per simulated s"),
+                      ("per_step", "simulation, wall per step"), ("setup", "check set-up"),
+                      ("before", "check per sample, before (prune off)"),
+                      ("after", "check per sample, after (prune on)"), ("dj", "D_j per sample (refine off)")):
+        lines.append(f"  {name:40s} {exponent(n, [x[key] for x in rows]):5.2f}")
+    lines += ["", "before / after, median of the per-sample ratios: "
+              + ", ".join(f"{x['label']} {x['ratio']:.2f}" for x in rows),
+              f"total bench time {time.perf_counter() - start:.0f} s"]
+    text = "\n".join(lines)
+    print(text)
+    args.out.write_text(text + "\n")
+
+
+if __name__ == "__main__":
+    main()

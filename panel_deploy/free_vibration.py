@@ -1,0 +1,536 @@
+"""Free-vibration tests: hinge damping (and stiffness, and air drag) from recordings
+of one panel swinging on one spring-loaded hinge, as the paper measured damping.
+
+The rig is a scene of two bodies and one hinge (ground and panel; a 2 x 2
+array merges into that). About the hinge axis it is one degree of freedom,
+
+    I theta'' = -n k (theta - theta_e) - n c theta' + G(theta) - G(theta_e) - C_d D |theta'| theta'
+
+with n springs of stiffness k (N m/rad) and damping c (N m s/rad) each, the
+panel's inertia I (kg m^2), its gravity torque G (N m) and its air drag
+torque per unit drag coefficient D (N m s^2), all three from the rig's model
+(:func:`rig_of`). The equilibrium theta_e is measured, not computed: it takes
+up the encoder's zero and the weight's preload, so k is identified by the
+frequency alone. The joint stops are not in it: a swing that reaches one is
+refused (:func:`check_swing`).
+
+Each test is analysed two ways: the logarithmic decrement of its peaks
+(:func:`log_decrement`) and a least-squares fit of the model's free response
+(:func:`fit_swing`); :func:`pool` combines the tests by inverse-variance
+weighting and says whether they agree. Failures to fit are results
+(``success=False``), never exceptions; exceptions are for bad input.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .errors import TrajectoryError
+from .model import AirParameters
+
+#: Fewest extrema (peaks and troughs) a test needs: four peak-to-peak
+#: amplitudes give the decrement's regression two degrees of freedom.
+MIN_PEAKS = 5
+#: Peaks are used while their amplitude about the equilibrium is at least this
+#: many noise standard deviations: below, noise biases the ratios.
+PEAK_SNR = 20.0
+#: A record whose range is below this many noise standard deviations is motionless.
+MOTION_SNR = 50.0
+#: The drag coefficient counts as identified when its standard error is below
+#: this (a coefficient of order 1 known to +-0.5 at 95 %) and its estimate is
+#: not almost collinear with the damping's.
+DRAG_SE_LIMIT = 0.25
+COLLINEAR = 0.98
+#: Confidence level of every interval.
+LEVEL = 0.95
+
+
+@dataclass(frozen=True)
+class Rig:
+    """One panel on one hinge, about the hinge axis (SI units).
+
+    ``gravity`` holds (g0, g1, g2) of the gravity torque G(theta) = g0 + g1
+    sin(theta) + g2 cos(theta), N m: one rigid body turning about a fixed axis
+    has exactly this form. ``drag`` is D, the air torque -C_d D |omega| omega
+    per unit drag coefficient, N m s^2 (0 without air). ``k`` and ``c`` are
+    the rig scene's own, of one spring.
+    """
+
+    hinge: str
+    springs: int
+    inertia: float
+    gravity: tuple
+    drag: float
+    drag_coefficient: float
+    k: float
+    c: float
+
+    def gravity_torque(self, theta):
+        g0, g1, g2 = self.gravity
+        return g0 + g1 * np.sin(theta) + g2 * np.cos(theta)
+
+    def gravity_gradient(self, theta):
+        """dG/dtheta, N m/rad (negative: gravity stiffens the swing)."""
+        _, g1, g2 = self.gravity
+        return g1 * np.cos(theta) - g2 * np.sin(theta)
+
+
+def rig_of(model, source: str = "") -> Rig:
+    """The :class:`Rig` of a model of one panel on one hinge.
+
+    I, G and D come from the dynamics kernels' own mass matrix and
+    generalised forces, so the rig obeys the package's model exactly.
+
+    Raises
+    ------
+    TrajectoryError
+        The model is not two bodies joined by one hinge (``source`` names the recording).
+    """
+    from .dynamics.kernels import mass_and_bias
+    from .dynamics.pack import pack
+
+    if len(model.hinges) != 1 or model.n_coords != 1:
+        raise TrajectoryError(f"{source}: not one panel on one hinge: its scene has "
+                              f"{model.n_bodies} bodies and {len(model.hinges)} hinges")
+    h = model.hinges[0]
+    P = pack(model)
+    free = P._replace(k=np.zeros_like(P.k), c=np.zeros_like(P.c))
+
+    def force(P, theta, omega):
+        return float(mass_and_bias(P, np.array([theta]), np.array([omega]))[1][0])
+
+    angles = (0.0, 0.5 * np.pi, np.pi)
+    g = np.linalg.solve([[1.0, np.sin(a), np.cos(a)] for a in angles],
+                        [force(free, a, 0.0) for a in angles])
+    drag = 0.0
+    if model.air.density > 0:
+        # with a unit drag coefficient, D is the torque at omega = 1 rad/s
+        unit = pack(replace(model, air=AirParameters(model.air.density, 1.0)))
+        unit = unit._replace(k=free.k, c=free.c)
+        drag = force(unit, 1.0, 0.0) - force(unit, 1.0, 1.0)
+    inertia = float(mass_and_bias(P, np.array([1.0]), np.array([0.0]))[0][0, 0])
+    return Rig(h.name, int(h.springs), inertia, tuple(float(x) for x in g), float(drag),
+               float(model.air.drag_coefficient if model.air.density > 0 else 0.0),
+               float(h.k), float(h.c))
+
+
+@dataclass(frozen=True)
+class Swing:
+    """One recorded free vibration: ``t`` (s, from the first sample) and ``theta`` (rad)."""
+
+    source: str
+    t: np.ndarray
+    theta: np.ndarray
+
+
+def noise_level(theta) -> float:
+    """The white noise's standard deviation in ``theta``, rad, from fourth
+    differences (the noise's grow sqrt(70) fold; a swing sampled 30 times per
+    period adds (2 pi / 30)^4 = 0.2 % of its amplitude), median-based so that
+    a few outliers do not count."""
+    d4 = np.diff(np.asarray(theta, dtype=float), 4)
+    return float(np.median(np.abs(d4 - np.median(d4))) / 0.6745 / np.sqrt(70.0))
+
+
+@dataclass(frozen=True)
+class Peaks:
+    """Alternating extrema of a swing: times (s) and values (rad), in order."""
+
+    t: np.ndarray
+    theta: np.ndarray
+    noise: float
+    equilibrium: float
+
+
+def _lobes(theta, centre, band):
+    """Index ranges of the excursions beyond centre +- band, alternating in sign."""
+    side = np.where(theta > centre + band, 1, np.where(theta < centre - band, -1, 0))
+    lobes, start, sign = [], None, 0
+    for j, s in enumerate(side):
+        if s == 0 or s == sign:
+            continue
+        if sign != 0:
+            lobes.append((start, j, sign))
+        start, sign = j, s
+    if sign != 0:
+        lobes.append((start, len(theta), sign))
+    return lobes
+
+
+def _vertex(t, theta, j, half):
+    """The extremum near sample j: the vertex of a parabola fitted to the
+    2 half + 1 samples around it (averages the noise; a cosine is a parabola
+    to 0.1 % within a sixteenth of its period)."""
+    lo, hi = max(j - half, 0), min(j + half + 1, len(t))
+    if hi - lo < 3:
+        return t[j], theta[j]
+    tc = t[lo:hi] - t[j]
+    a, b, c = np.polyfit(tc, theta[lo:hi], 2)
+    if a == 0 or not tc[0] <= -b / (2 * a) <= tc[-1]:
+        return t[j], theta[j]
+    x = -b / (2 * a)
+    return t[j] + x, c - b * b / (4 * a)
+
+
+def find_peaks(swing: Swing) -> Peaks:
+    """The swing's alternating peaks and troughs above :data:`PEAK_SNR` x noise."""
+    t, theta = swing.t, swing.theta
+    noise = max(noise_level(theta), 1e-12 * max(1.0, float(np.ptp(theta))))
+    centre = float(np.median(theta))
+    band = 5.0 * noise
+    values = times = np.empty(0)
+    for _ in range(2):  # the median, then the peaks' own equilibrium, as the centre
+        lobes = _lobes(theta, centre, band)
+        if len(lobes) < 2:
+            break
+        dt = float(np.median(np.diff(t)))
+        spans = [t[min(b, len(t) - 1)] - t[a] for a, b, _ in lobes[1:-1]] or [t[-1] - t[0]]
+        half = max(1, int(round(2.0 * float(np.median(spans)) / 16.0 / dt)))
+        extrema = [_vertex(t, theta, a + int(np.argmax(s * theta[a:b])), half)
+                   for a, b, s in lobes]
+        times = np.array([e[0] for e in extrema])
+        values = np.array([e[1] for e in extrema])
+        centre = _equilibrium(values, centre)
+    keep = np.abs(values - centre) >= PEAK_SNR * noise
+    # the peaks from the first to the last strong one (a weak one inside is kept:
+    # dropping it would break the alternation)
+    strong = np.flatnonzero(keep)
+    part = slice(strong[0], strong[-1] + 1) if len(strong) else slice(0, 0)
+    return Peaks(times[part], values[part], noise, centre)
+
+
+def _equilibrium(values, fallback: float) -> float:
+    """The centre of alternating extrema decaying geometrically: with ratio q
+    per half cycle, e = (q y_j + y_{j+1}) / (1 + q) for every pair."""
+    if len(values) < 3:
+        return fallback
+    d = np.abs(np.diff(values))
+    q = float(np.median(d[1:] / d[:-1]))
+    if not 0 < q < 1:
+        return fallback
+    return float(np.median((q * values[:-1] + values[1:]) / (1 + q)))
+
+
+def check_swing(swing: Swing, rig: Rig) -> Peaks:
+    """The swing's peaks, once it is known to be a free vibration this module can read.
+
+    Raises
+    ------
+    TrajectoryError
+        One line naming the file: too few samples, motionless, reaching a
+        joint stop (0 or pi rad), or fewer than :data:`MIN_PEAKS` peaks above
+        the noise.
+    """
+    src, theta = swing.source, swing.theta
+    if len(theta) < 20:
+        raise TrajectoryError(f"{src}: {len(theta)} joint states of {rig.hinge}; a free "
+                              f"vibration needs a record of many samples per swing")
+    noise = noise_level(theta)
+    span = float(np.ptp(theta))
+    if span <= MOTION_SNR * noise or span < 1e-9:
+        raise TrajectoryError(f"{src}: motionless: {rig.hinge} spans {span:.3g} rad, within "
+                              f"the noise ({noise:.2g} rad)")
+    low, high = float(theta.min()), float(theta.max())
+    if low < -3 * noise or high > np.pi + 3 * noise:
+        raise TrajectoryError(f"{src}: {rig.hinge} reaches a joint stop ({low:.3g} .. {high:.3g} "
+                              f"rad against 0 .. pi): a swing against a stop is no free vibration "
+                              f"of the spring")
+    peaks = find_peaks(swing)
+    if len(peaks.t) < MIN_PEAKS:
+        raise TrajectoryError(f"{src}: too few peaks: {len(peaks.t)} peaks and troughs above "
+                              f"{PEAK_SNR:g} x the noise ({peaks.noise:.2g} rad), at least "
+                              f"{MIN_PEAKS} needed (two and a half swings)")
+    return peaks
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A positive quantity with its standard error in log (``se`` of ln value)
+    and its 95 % interval [low, high]; SI units of the quantity."""
+
+    value: float
+    se: float
+    low: float
+    high: float
+
+    @classmethod
+    def from_log(cls, log_value: float, se: float, dof: float) -> Estimate:
+        from scipy.stats import t as student
+
+        half = float(student.ppf(0.5 + LEVEL / 2, dof)) * se
+        return cls(float(np.exp(log_value)), float(se), float(np.exp(log_value - half)),
+                   float(np.exp(log_value + half)))
+
+    def as_dict(self, digits: int = 6) -> dict:
+        return {k: float(f"{getattr(self, k):.{digits}g}") for k in ("value", "low", "high")}
+
+
+@dataclass(frozen=True)
+class Analysis:
+    """One test analysed one way (``method``: "log decrement" or "fit").
+
+    ``c`` and ``k`` are of one spring (N m s/rad, N m/rad), ``ratio`` is
+    c/k (s); ``drag`` the drag coefficient when identified, else None with
+    the reason in ``notes``. ``equilibrium`` rad, ``rms`` the residual (fit)
+    or the peak regression's scatter, rad.
+    """
+
+    source: str
+    method: str
+    success: bool
+    message: str = ""
+    c: Estimate | None = None
+    k: Estimate | None = None
+    ratio: Estimate | None = None
+    zeta: float = float("nan")
+    drag: Estimate | None = None
+    equilibrium: float = float("nan")
+    rms: float = float("nan")
+    peaks: int = 0
+    notes: tuple = field(default_factory=tuple)
+
+
+def _regression(x, y):
+    """Slope, intercept, the slope's standard error and the residual scatter of y on x."""
+    A = np.column_stack([x, np.ones_like(x)])
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    r = y - A @ coef
+    dof = len(x) - 2
+    s2 = float(r @ r) / dof if dof > 0 else float("nan")
+    cov = s2 * np.linalg.inv(A.T @ A)
+    return float(coef[0]), float(coef[1]), float(np.sqrt(cov[0, 0])), float(np.sqrt(s2))
+
+
+def log_decrement(swing: Swing, rig: Rig, peaks: Peaks) -> Analysis:
+    """c and k of one spring from the peaks' decay and spacing.
+
+    The peak-to-peak amplitudes d_j = |y_j - y_{j+1}| of extrema half a
+    period apart fall by e^(-delta/2) per half cycle whatever the
+    equilibrium, so delta comes from a regression of ln d_j on j and the
+    damped period T_d from one of the peak times on j. Then zeta =
+    delta / sqrt(4 pi^2 + delta^2), n c = 2 zeta omega_n I = 2 I delta / T_d
+    and n k = I omega_n^2 + dG/dtheta at the equilibrium. With air the decrement
+    counts the drag as damping.
+    """
+    d = np.abs(np.diff(peaks.theta))
+    j = np.arange(len(d), dtype=float)
+    slope, _, se_slope, scatter = _regression(j, np.log(d))
+    half_period, _, se_half, _ = _regression(np.arange(len(peaks.t), dtype=float), peaks.t)
+    delta, se_delta = -2.0 * slope, 2.0 * se_slope
+    period, se_period = 2.0 * half_period, 2.0 * se_half
+    if not delta > 0:
+        return Analysis(swing.source, "log decrement", False,
+                        f"the peaks do not decay (delta = {delta:.3g})", peaks=len(peaks.t))
+    n, inertia = rig.springs, rig.inertia
+    zeta = delta / np.sqrt(4 * np.pi ** 2 + delta ** 2)
+    k_eff = inertia * (4 * np.pi ** 2 + delta ** 2) / period ** 2
+    k_hinge = k_eff + float(rig.gravity_gradient(peaks.equilibrium))
+    c_hinge = 2.0 * inertia * delta / period
+    # first-order propagation of delta's and T_d's errors (two separate regressions)
+    g_c = np.array([1.0 / delta, -1.0 / period])
+    g_k = k_eff / k_hinge * np.array([2 * delta / (4 * np.pi ** 2 + delta ** 2), -2.0 / period])
+    cov = np.diag([se_delta ** 2, se_period ** 2])
+    dof = len(d) - 2
+
+    def estimate(value, gradient):
+        return Estimate.from_log(np.log(value), float(np.sqrt(gradient @ cov @ gradient)), dof)
+
+    return Analysis(swing.source, "log decrement", True,
+                    c=estimate(c_hinge / n, g_c), k=estimate(k_hinge / n, g_k),
+                    ratio=estimate(c_hinge / k_hinge, g_c - g_k), zeta=float(zeta),
+                    equilibrium=peaks.equilibrium, rms=scatter, peaks=len(peaks.t),
+                    notes=("counts the air drag as damping",) if rig.drag > 0 else ())
+
+
+class _Response:
+    """The model's free response and its sensitivities to the parameters
+    (forward sensitivity equations, integrated with the motion: one solve
+    gives residuals and Jacobian). Parameters: ln c, ln k (one spring),
+    theta_e, theta_0, omega_0 at the first sample, then C_d when fitted."""
+
+    def __init__(self, rig: Rig, t, drag_coefficient: float | None):
+        self.rig, self.t = rig, t
+        self.fixed_drag = drag_coefficient  # None: C_d is the sixth parameter
+        self._x = None
+
+    def parameters(self, x):
+        cd = x[5] if self.fixed_drag is None else self.fixed_drag
+        return np.exp(x[0]), np.exp(x[1]), x[2], x[3], x[4], cd
+
+    def solve(self, x):
+        if self._x is not None and np.array_equal(x, self._x):
+            return self._out
+        from scipy.integrate import odeint
+
+        rig, p = self.rig, len(x)
+        c, k, te, t0, w0, cd = self.parameters(x)
+        n, inertia, D = rig.springs, rig.inertia, rig.drag
+        ge, dge = rig.gravity_torque(te), rig.gravity_gradient(te)
+
+        def rhs(y, _):
+            th, w = y[0], y[1]
+            S = y[2:].reshape(2, p)
+            acc = (-n * k * (th - te) - n * c * w + rig.gravity_torque(th) - ge
+                   - cd * D * abs(w) * w) / inertia
+            d_th = (-n * k + rig.gravity_gradient(th)) / inertia
+            d_w = (-n * c - 2.0 * cd * D * abs(w)) / inertia
+            direct = np.zeros(p)
+            direct[0] = -n * c * w / inertia
+            direct[1] = -n * k * (th - te) / inertia
+            direct[2] = (n * k - dge) / inertia
+            if self.fixed_drag is None:
+                direct[5] = -D * abs(w) * w / inertia
+            return np.concatenate([[w, acc], S[1], d_th * S[0] + d_w * S[1] + direct])
+
+        y0 = np.zeros(2 + 2 * p)
+        y0[:2] = t0, w0
+        y0[2 + 3] = 1.0           # d theta(0) / d theta_0
+        y0[2 + p + 4] = 1.0       # d omega(0) / d omega_0
+        y = odeint(rhs, y0, self.t, rtol=1e-10, atol=1e-12, mxstep=100000)
+        self._x, self._out = np.array(x), (y[:, 0], y[:, 2:2 + p])
+        return self._out
+
+
+def fit_swing(swing: Swing, rig: Rig, peaks: Peaks, start: Analysis,
+              fit_drag: bool | None = None) -> Analysis:
+    """c, k (and C_d) of one spring by weighted least squares of the model's
+    free response on the recorded angles from the first peak on.
+
+    ``start`` (the log decrement) gives the starting point. ``fit_drag``
+    None fits C_d when the rig has air and keeps it only if identified (see
+    :data:`DRAG_SE_LIMIT`); otherwise the rig's own C_d is used and the
+    notes say why. c and k are fitted in log space: they stay positive and
+    their intervals are relative, as their errors are.
+    """
+    from scipy.optimize import least_squares
+    from scipy.stats import t as student
+
+    if fit_drag is None:
+        fit_drag = rig.drag > 0
+    first = np.searchsorted(swing.t, peaks.t[0])
+    t = swing.t[first:] - swing.t[first]
+    theta = swing.theta[first:]
+    model = _Response(rig, t, None if fit_drag else rig.drag_coefficient)
+    c0 = start.c.value if start.success else max(rig.c, 1e-9)
+    k0 = start.k.value if start.success else max(rig.k, 1e-9)
+    x0 = [np.log(c0), np.log(k0), peaks.equilibrium, theta[0], 0.0]
+    lower, upper = [-np.inf] * 5, [np.inf] * 5
+    if fit_drag:
+        x0.append(max(rig.drag_coefficient, 0.5))
+        lower.append(0.0)
+        upper.append(5.0)  # the scene's own limit of air.drag_coefficient
+
+    def residual(x):
+        return model.solve(x)[0] - theta
+
+    def jacobian(x):
+        return model.solve(x)[1]
+
+    try:
+        sol = least_squares(residual, x0, jac=jacobian, bounds=(lower, upper), x_scale="jac",
+                            method="trf", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=200)
+    except (ValueError, np.linalg.LinAlgError) as e:  # an integration that blew up
+        return Analysis(swing.source, "fit", False, f"the fit failed ({e})", peaks=len(peaks.t))
+    if not sol.success:
+        return Analysis(swing.source, "fit", False, f"the fit did not converge ({sol.message})",
+                        peaks=len(peaks.t))
+    N, p = len(t), len(sol.x)
+    rms = float(np.sqrt(np.mean(sol.fun ** 2)))
+    s2 = float(sol.fun @ sol.fun) / (N - p)
+    try:
+        cov = s2 * np.linalg.inv(sol.jac.T @ sol.jac)
+    except np.linalg.LinAlgError:
+        return Analysis(swing.source, "fit", False, "the fit's parameters are not "
+                        "identifiable (singular Jacobian)", peaks=len(peaks.t))
+    notes = []
+    if fit_drag:
+        se_cd = float(np.sqrt(cov[5, 5]))
+        corr = float(cov[0, 5] / np.sqrt(cov[0, 0] * cov[5, 5]))
+        if se_cd > DRAG_SE_LIMIT or abs(corr) > COLLINEAR:
+            refit = fit_swing(swing, rig, peaks, start, fit_drag=False)
+            why = (f"drag not identifiable from this record (C_d = {sol.x[5]:.3g} +- "
+                   f"{se_cd:.2g}, correlation with c {corr:+.3f}): c and k given the scene's "
+                   f"C_d = {rig.drag_coefficient:g}")
+            return replace(refit, notes=(why, *refit.notes))
+    dof = N - p
+    cov_log = cov[:2, :2]
+    g_ratio = np.array([1.0, -1.0])
+    c = Estimate.from_log(sol.x[0], float(np.sqrt(cov_log[0, 0])), dof)
+    k = Estimate.from_log(sol.x[1], float(np.sqrt(cov_log[1, 1])), dof)
+    ratio = Estimate.from_log(sol.x[0] - sol.x[1], float(np.sqrt(g_ratio @ cov_log @ g_ratio)), dof)
+    drag = None
+    if fit_drag:
+        half = float(student.ppf(0.5 + LEVEL / 2, dof)) * float(np.sqrt(cov[5, 5]))
+        drag = Estimate(float(sol.x[5]), float(np.sqrt(cov[5, 5])),
+                        max(0.0, float(sol.x[5]) - half), float(sol.x[5]) + half)
+    if rms > 3.0 * peaks.noise:
+        notes.append(f"the model misses the record: residual {rms:.2g} rad RMS against "
+                     f"{peaks.noise:.2g} rad of noise")
+    k_eff = rig.springs * k.value - float(rig.gravity_gradient(sol.x[2]))
+    zeta = rig.springs * c.value / (2.0 * np.sqrt(k_eff * rig.inertia))
+    return Analysis(swing.source, "fit", True, c=c, k=k, ratio=ratio, zeta=float(zeta),
+                    drag=drag, equilibrium=float(sol.x[2]), rms=rms, peaks=len(peaks.t),
+                    notes=tuple(notes))
+
+
+@dataclass(frozen=True)
+class Pooled:
+    """Estimates of several tests combined by inverse-variance weights in log space.
+
+    ``chi2`` on ``dof`` degrees of freedom tests whether they agree (``p``
+    its probability under agreement). When they do not (p < 0.05), the
+    interval is widened by the Birge ratio sqrt(chi2 / dof): the tests
+    scatter more than their own errors say.
+    """
+
+    estimate: Estimate
+    chi2: float
+    dof: int
+    p: float
+    widened: bool
+
+    @property
+    def agree(self) -> bool:
+        return self.dof == 0 or self.p >= 1 - LEVEL
+
+
+def pool(estimates) -> Pooled:
+    """Inverse-variance weighted mean of positive estimates (in log space)."""
+    from scipy.stats import chi2 as chi_square
+
+    logs = np.log([e.value for e in estimates])
+    se = np.array([max(e.se, 1e-12) for e in estimates])
+    w = 1.0 / se ** 2
+    mean = float(w @ logs / w.sum())
+    se_mean = float(1.0 / np.sqrt(w.sum()))
+    dof = len(estimates) - 1
+    chi2 = float(w @ (logs - mean) ** 2)
+    p = float(chi_square.sf(chi2, dof)) if dof else 1.0
+    widened = dof > 0 and p < 1 - LEVEL
+    if widened:
+        se_mean *= np.sqrt(chi2 / dof)
+    return Pooled(Estimate.from_log(mean, se_mean, np.inf), chi2, dof, p, widened)
+
+
+def read_swing(path, rig_scene: str | None = None, namespace: str | None = None) -> tuple:
+    """``(swing, rig, peaks)`` of one recording, checked (:func:`check_swing`).
+
+    The rig is the recording's own scene, else ``rig_scene`` (a file or a
+    shipped name) when given; the angles are those of its one hinge.
+
+    Raises
+    ------
+    TrajectoryError
+        No such file, not a recording, no scene, not one panel on one hinge,
+        or a record :func:`check_swing` refuses.
+    SceneError
+        ``rig_scene`` is not a valid scene.
+    """
+    from .record.analysis import read_deployment
+
+    d = read_deployment(path, rig_scene, namespace)
+    rig = rig_of(d.model, str(path))
+    swing = Swing(str(path), d.track.t, d.track.theta[:, 0])
+    return swing, rig, check_swing(swing, rig)

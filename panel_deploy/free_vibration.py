@@ -245,26 +245,42 @@ def check_swing(swing: Swing, rig: Rig) -> Peaks:
     return peaks
 
 
+def _quantile(dof: float) -> float:
+    """Student's t quantile of the two-sided :data:`LEVEL` interval."""
+    from scipy.stats import t as student
+
+    return float(student.ppf(0.5 + LEVEL / 2, dof))
+
+
 @dataclass(frozen=True)
 class Estimate:
-    """A positive quantity with its standard error in log (``se`` of ln value)
-    and its 95 % interval [low, high]; SI units of the quantity."""
+    """A quantity with its standard error and 95 % interval [low, high], SI
+    units. ``log``: a positive quantity estimated in log space, ``se`` that
+    of its logarithm (a relative error); else ``se`` is absolute."""
 
     value: float
     se: float
     low: float
     high: float
+    log: bool = True
 
     @classmethod
     def from_log(cls, log_value: float, se: float, dof: float) -> Estimate:
-        from scipy.stats import t as student
-
-        half = float(student.ppf(0.5 + LEVEL / 2, dof)) * se
+        """From ln value and its standard error, with ``dof`` degrees of freedom."""
+        half = _quantile(dof) * se
         return cls(float(np.exp(log_value)), float(se), float(np.exp(log_value - half)),
                    float(np.exp(log_value + half)))
 
-    def as_dict(self, digits: int = 6) -> dict:
-        return {k: float(f"{getattr(self, k):.{digits}g}") for k in ("value", "low", "high")}
+    @classmethod
+    def linear(cls, value: float, se: float, dof: float, floor: float = -np.inf) -> Estimate:
+        """From the value and its standard error; the interval cut at ``floor``."""
+        half = _quantile(dof) * se
+        return cls(float(value), float(se), max(floor, float(value) - half),
+                   float(value) + half, log=False)
+
+    def figures(self) -> dict:
+        """value, low and high to six significant digits, as plain floats."""
+        return {k: float(f"{getattr(self, k):.6g}") for k in ("value", "low", "high")}
 
 
 @dataclass(frozen=True)
@@ -273,8 +289,8 @@ class Analysis:
 
     ``c`` and ``k`` are of one spring (N m s/rad, N m/rad), ``ratio`` is
     c/k (s); ``drag`` the drag coefficient when identified, else None with
-    the reason in ``notes``. ``equilibrium`` rad, ``rms`` the residual (fit)
-    or the peak regression's scatter, rad.
+    the reason in ``notes``. ``equilibrium`` rad; ``rms`` the fit's residual
+    RMS (rad) or the scatter of the decrement's ln peak-to-peak amplitudes.
     """
 
     source: str
@@ -405,7 +421,6 @@ def fit_swing(swing: Swing, rig: Rig, peaks: Peaks, start: Analysis,
     their intervals are relative, as their errors are.
     """
     from scipy.optimize import least_squares
-    from scipy.stats import t as student
 
     if fit_drag is None:
         fit_drag = rig.drag > 0
@@ -436,9 +451,9 @@ def fit_swing(swing: Swing, rig: Rig, peaks: Peaks, start: Analysis,
     if not sol.success:
         return Analysis(swing.source, "fit", False, f"the fit did not converge ({sol.message})",
                         peaks=len(peaks.t))
-    N, p = len(t), len(sol.x)
+    dof = len(t) - len(sol.x)
     rms = float(np.sqrt(np.mean(sol.fun ** 2)))
-    s2 = float(sol.fun @ sol.fun) / (N - p)
+    s2 = float(sol.fun @ sol.fun) / dof
     try:
         cov = s2 * np.linalg.inv(sol.jac.T @ sol.jac)
     except np.linalg.LinAlgError:
@@ -454,7 +469,6 @@ def fit_swing(swing: Swing, rig: Rig, peaks: Peaks, start: Analysis,
                    f"{se_cd:.2g}, correlation with c {corr:+.3f}): c and k given the scene's "
                    f"C_d = {rig.drag_coefficient:g}")
             return replace(refit, notes=(why, *refit.notes))
-    dof = N - p
     cov_log = cov[:2, :2]
     g_ratio = np.array([1.0, -1.0])
     c = Estimate.from_log(sol.x[0], float(np.sqrt(cov_log[0, 0])), dof)
@@ -462,9 +476,7 @@ def fit_swing(swing: Swing, rig: Rig, peaks: Peaks, start: Analysis,
     ratio = Estimate.from_log(sol.x[0] - sol.x[1], float(np.sqrt(g_ratio @ cov_log @ g_ratio)), dof)
     drag = None
     if fit_drag:
-        half = float(student.ppf(0.5 + LEVEL / 2, dof)) * float(np.sqrt(cov[5, 5]))
-        drag = Estimate(float(sol.x[5]), float(np.sqrt(cov[5, 5])),
-                        max(0.0, float(sol.x[5]) - half), float(sol.x[5]) + half)
+        drag = Estimate.linear(sol.x[5], np.sqrt(cov[5, 5]), dof, floor=0.0)
     if rms > 3.0 * peaks.noise:
         notes.append(f"the model misses the record: residual {rms:.2g} rad RMS against "
                      f"{peaks.noise:.2g} rad of noise")
@@ -477,7 +489,7 @@ def fit_swing(swing: Swing, rig: Rig, peaks: Peaks, start: Analysis,
 
 @dataclass(frozen=True)
 class Pooled:
-    """Estimates of several tests combined by inverse-variance weights in log space.
+    """Estimates of several tests combined by inverse-variance weights.
 
     ``chi2`` on ``dof`` degrees of freedom tests whether they agree (``p``
     its probability under agreement). When they do not (p < 0.05), the
@@ -497,21 +509,23 @@ class Pooled:
 
 
 def pool(estimates) -> Pooled:
-    """Inverse-variance weighted mean of positive estimates (in log space)."""
+    """Inverse-variance weighted mean of estimates (of logarithms for those in log space)."""
     from scipy.stats import chi2 as chi_square
 
-    logs = np.log([e.value for e in estimates])
-    se = np.array([max(e.se, 1e-12) for e in estimates])
-    w = 1.0 / se ** 2
-    mean = float(w @ logs / w.sum())
+    log = estimates[0].log
+    x = np.array([np.log(e.value) if log else e.value for e in estimates])
+    w = 1.0 / np.array([max(e.se, 1e-12) for e in estimates]) ** 2
+    mean = float(w @ x / w.sum())
     se_mean = float(1.0 / np.sqrt(w.sum()))
     dof = len(estimates) - 1
-    chi2 = float(w @ (logs - mean) ** 2)
+    chi2 = float(w @ (x - mean) ** 2)
     p = float(chi_square.sf(chi2, dof)) if dof else 1.0
     widened = dof > 0 and p < 1 - LEVEL
     if widened:
         se_mean *= np.sqrt(chi2 / dof)
-    return Pooled(Estimate.from_log(mean, se_mean, np.inf), chi2, dof, p, widened)
+    estimate = (Estimate.from_log(mean, se_mean, np.inf) if log
+                else Estimate.linear(mean, se_mean, np.inf, floor=0.0))
+    return Pooled(estimate, chi2, dof, p, widened)
 
 
 def read_swing(path, rig_scene: str | None = None, namespace: str | None = None) -> tuple:
@@ -534,3 +548,127 @@ def read_swing(path, rig_scene: str | None = None, namespace: str | None = None)
     rig = rig_of(d.model, str(path))
     swing = Swing(str(path), d.track.t, d.track.theta[:, 0])
     return swing, rig, check_swing(swing, rig)
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Every test analysed both ways and the tests pooled.
+
+    ``tests`` holds ``(log_decrement, fit)`` per recording; ``fit`` and
+    ``log_decrement`` map "c", "k", "ratio" (and the fit "drag", when some
+    test identified it) to their :class:`Pooled` over the tests that
+    succeeded; empty when none did.
+    """
+
+    tests: tuple
+    fit: dict
+    log_decrement: dict
+
+    @property
+    def success(self) -> bool:
+        return "ratio" in self.fit
+
+
+def _pooled(analyses, names) -> dict:
+    out = {}
+    for name in names:
+        found = [getattr(a, name) for a in analyses if a.success and getattr(a, name) is not None]
+        if found:
+            out[name] = pool(found)
+    return out
+
+
+def calibrate(readings) -> Calibration:
+    """Analyse ``readings`` (``(swing, rig, peaks)`` from :func:`read_swing`)
+    by log decrement and by fit, and pool them."""
+    tests = []
+    for swing, rig, peaks in readings:
+        decrement = log_decrement(swing, rig, peaks)
+        tests.append((decrement, fit_swing(swing, rig, peaks, decrement)))
+    return Calibration(tuple(tests), _pooled([f for _, f in tests], ("c", "k", "ratio", "drag")),
+                       _pooled([d for d, _ in tests], ("c", "k", "ratio")))
+
+
+#: Units of the figures (c and k of one spring).
+UNITS = {"c": "N m s/rad", "k": "N m/rad", "ratio": "s", "drag": ""}
+LABELS = {"c": "c", "k": "k", "ratio": "c/k", "drag": "C_d"}
+
+
+def calibration_record(cal: Calibration, hinge: str | None = None) -> dict:
+    """The ``calibration`` section of a calibrated scene (plain values, YAML
+    and JSON alike): the pooled fit with its intervals and agreement, the
+    pooled log decrement, and every test."""
+    def pooled(found):
+        return {name: {**p.estimate.figures(), "unit": UNITS[name], "chi2": round(p.chi2, 3),
+                       "dof": p.dof, "p": round(p.p, 4), "widened": p.widened}
+                for name, p in found.items()}
+
+    tests = []
+    for decrement, fit in cal.tests:
+        test = {"recording": fit.source, "peaks": fit.peaks}
+        for a in (fit, decrement):
+            key = "fit" if a is fit else "log_decrement"
+            test[key] = ({name: getattr(a, name).figures() for name in ("c", "k", "ratio", "drag")
+                          if getattr(a, name) is not None} if a.success else {"failed": a.message})
+            if a.success:
+                test[key].update({"zeta": float(f"{a.zeta:.6g}"),
+                                  "rms_rad" if a is fit else "scatter_ln": float(f"{a.rms:.3g}")})
+            if a.notes:
+                test[key]["notes"] = list(a.notes)
+        tests.append(test)
+    return {"method": "free vibration: fit of the one-hinge model's free response (log "
+                      "decrement beside it); c and k of one spring",
+            "confidence": LEVEL,
+            **({"hinge": hinge} if hinge else {}),
+            "fit": pooled(cal.fit), "log_decrement": pooled(cal.log_decrement), "tests": tests}
+
+
+def calibrated_scene(data: dict, cal: Calibration, hinge: str | None = None) -> dict:
+    """Scene ``data`` with the pooled fit's damping: ``hinges.damping_ratio``
+    = c/k, or with ``hinge`` that hinge's ``hinges.damping_overrides`` entry =
+    c (N m s/rad, one spring); and the ``calibration`` section."""
+    out = dict(data)
+    hinges = dict(out.get("hinges") or {})
+    if hinge is None:
+        hinges["damping_ratio"] = cal.fit["ratio"].estimate.figures()["value"]
+    else:
+        hinges["damping_overrides"] = {**(hinges.get("damping_overrides") or {}),
+                                       hinge: cal.fit["c"].estimate.figures()["value"]}
+    out["hinges"] = hinges
+    out["calibration"] = calibration_record(cal, hinge)
+    return out
+
+
+def _line(label, e: Estimate | None, unit="") -> str:
+    if e is None:
+        return f"  {label:<6} -"
+    return f"  {label:<6} {e.value:.5g} [{e.low:.5g}, {e.high:.5g}] {unit}".rstrip()
+
+
+def report_text(cal: Calibration) -> str:
+    """The human report: every test both ways, then the pooled figures."""
+    lines = []
+    for decrement, fit in cal.tests:
+        lines.append(f"{fit.source}: {fit.peaks} peaks")
+        for a in (decrement, fit):
+            if not a.success:
+                lines.append(f"  {a.method}: failed: {a.message}")
+                continue
+            spread = (f"residual {a.rms:.2g} rad RMS" if a is fit
+                      else f"ln amplitude scatter {a.rms:.2g}")
+            lines.append(f"  {a.method}: zeta {a.zeta:.4g}, equilibrium {a.equilibrium:.4g} rad, "
+                         f"{spread}")
+            lines += ["  " + _line(LABELS[n], getattr(a, n), UNITS[n])
+                      for n in ("c", "k", "ratio", "drag") if getattr(a, n) is not None]
+            lines += [f"    note: {note}" for note in a.notes]
+    for title, found in (("fit", cal.fit), ("log decrement", cal.log_decrement)):
+        if not found:
+            lines.append(f"pooled {title}: no test succeeded")
+            continue
+        lines.append(f"pooled {title} ({found['c'].dof + 1} tests, {LEVEL:.0%} intervals):")
+        for name, p in found.items():
+            verdict = ("" if p.dof == 0 else
+                       f"  chi2 {p.chi2:.3g} on {p.dof}, p {p.p:.3g}"
+                       + (": the tests disagree, interval widened" if p.widened else ""))
+            lines.append(_line(LABELS[name], p.estimate, UNITS[name]) + verdict)
+    return "\n".join(lines)

@@ -1,0 +1,177 @@
+"""Free-vibration tests (``panel-deploy calibrate --free-vibration``): c and k of a
+hinge spring from recordings of one panel swinging on one hinge."""
+
+import numpy as np
+import pytest
+
+from panel_deploy import contract
+from panel_deploy import free_vibration as fv
+from panel_deploy.build import build_model
+from panel_deploy.cli import main
+from panel_deploy.record import messages
+from panel_deploy.record.writer import DeploymentWriter
+from panel_deploy.scene import load_scene, scene_from_dict
+from panel_deploy.scene_text import scene_yaml
+
+#: The rig: a 2 x 2 array merges into two 2 x 1 bodies on one hinge line (two
+#: springs); no gravity and no air, so its free vibration is the closed form.
+RIG = {"name": "rig", "array": {"rows": 2, "cols": 2, "length": 0.1, "width": 0.1,
+                                "thickness": 0.005, "mass": 0.02},
+       "gravity": [0.0, 0.0, 0.0]}
+K, C = 0.1, 0.0005          # N m/rad, N m s/rad of one spring: zeta about 0.1
+NOISE = 1e-3                # rad
+RATE, DURATION = 200.0, 3.0  # Hz, s
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return fv.rig_of(build_model(scene_from_dict(RIG)), "rig")
+
+
+def closed_form(rig, t, c=C, k=K, equilibrium=0.6, amplitude=0.4):
+    """theta(t) of the linear oscillator released at rest from equilibrium + amplitude."""
+    n, inertia = rig.springs, rig.inertia
+    wn = np.sqrt(n * k / inertia)
+    zeta = n * c / (2.0 * np.sqrt(n * k * inertia))
+    wd = wn * np.sqrt(1.0 - zeta ** 2)
+    return equilibrium + amplitude * np.exp(-zeta * wn * t) * (
+        np.cos(wd * t) + zeta * wn / wd * np.sin(wd * t))
+
+
+def noisy_swing(rig, seed, **kwargs):
+    t = np.arange(0.0, DURATION, 1.0 / RATE)
+    theta = closed_form(rig, t, **kwargs) + np.random.default_rng(seed).normal(0.0, NOISE, t.size)
+    return fv.Swing(f"seed{seed}", t, theta)
+
+
+def write_recording(path, theta, t0=1000.0):
+    """A recording of the rig's joint states at RATE, carrying the rig scene."""
+    scene = scene_from_dict(RIG)
+    name = build_model(scene).hinges[0].name
+    empty = np.zeros(0)
+    with DeploymentWriter(path) as rec:
+        rec.write(contract.MODEL, messages.string(scene_yaml(scene)))
+        for j, value in enumerate(theta):
+            rec.write(contract.JOINT_STATES,
+                      messages.joint_state([name], t0 + j / RATE, [value], empty, empty))
+    return str(path)
+
+
+def test_rig_is_the_panel_about_its_hinge(rig):
+    # a 0.04 kg, 0.2 x 0.1 x 0.005 m plate about its long edge on the top facet:
+    # m (b^2 + t^2) / 12 + m ((b/2)^2 + (t/2)^2)
+    m, b, t = 0.04, 0.1, 0.005
+    assert rig.inertia == pytest.approx(m * (b ** 2 + t ** 2) / 3.0, rel=1e-9)
+    assert rig.springs == 2 and rig.drag == 0.0
+    assert np.allclose(rig.gravity, 0.0)
+
+
+def test_closed_form_recovers_c_within_2_percent_both_ways(rig):
+    swing = noisy_swing(rig, seed=0)
+    peaks = fv.check_swing(swing, rig)
+    assert peaks.noise == pytest.approx(NOISE, rel=0.2)
+    decrement = fv.log_decrement(swing, rig, peaks)
+    fit = fv.fit_swing(swing, rig, peaks, decrement)
+    assert decrement.success and fit.success
+    for a in (decrement, fit):
+        assert a.c.value == pytest.approx(C, rel=0.02)
+        assert a.k.value == pytest.approx(K, rel=0.02)
+        assert a.ratio.value == pytest.approx(C / K, rel=0.02)
+        assert a.c.low < a.c.value < a.c.high
+    assert fit.c.low <= C <= fit.c.high
+    assert fit.rms == pytest.approx(NOISE, rel=0.1)  # the model explains all but the noise
+    assert fit.equilibrium == pytest.approx(0.6, abs=1e-3)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_pooled_interval_covers_the_truth(rig, seed):
+    readings = []
+    for test in range(3):
+        swing = noisy_swing(rig, 10 * seed + test, amplitude=0.3 + 0.05 * test)
+        readings.append((swing, rig, fv.check_swing(swing, rig)))
+    cal = fv.calibrate(readings)
+    pooled = cal.fit["c"]
+    assert pooled.dof == 2 and pooled.agree
+    assert pooled.estimate.low <= C <= pooled.estimate.high
+    # pooling narrows the interval below every single test's
+    widths = [fit.c.high - fit.c.low for _, fit in cal.tests]
+    assert pooled.estimate.high - pooled.estimate.low < min(widths)
+    assert cal.log_decrement["c"].estimate.value == pytest.approx(C, rel=0.02)
+
+
+def test_pool_flags_tests_that_disagree():
+    tight = [fv.Estimate.from_log(np.log(v), 0.001, 100) for v in (1.0, 1.1, 0.9)]
+    pooled = fv.pool(tight)
+    assert not pooled.agree and pooled.widened and pooled.chi2 > 100
+    assert pooled.estimate.low < 0.97 and pooled.estimate.high > 1.03  # Birge-widened
+    agreeing = fv.pool([fv.Estimate.from_log(np.log(v), 0.1, 100) for v in (1.0, 1.1, 0.9)])
+    assert agreeing.agree and not agreeing.widened
+    assert agreeing.estimate.value == pytest.approx(np.exp(np.mean(np.log([1.0, 1.1, 0.9]))))
+
+
+def test_calibrate_writes_a_scene_that_reloads(tmp_path, rig, capsys):
+    paths = [write_recording(tmp_path / f"swing{i}.mcap", noisy_swing(rig, 40 + i).theta)
+             for i in range(2)]
+    out = tmp_path / "calibrated.yaml"
+    assert main(["calibrate", "--free-vibration", *paths, "--scene", "paper_4x4",
+                 "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "pooled fit (2 tests" in text and "pooled log decrement" in text
+    scene = load_scene(out)
+    assert scene.hinges.damping_ratio == pytest.approx(C / K, rel=0.02)
+    assert scene.name == "paper_4x4" and scene.hinges.stiffness == 0.1  # the rest untouched
+    record = scene.data["calibration"]
+    assert [t["recording"] for t in record["tests"]] == paths
+    assert record["fit"]["ratio"]["value"] == scene.hinges.damping_ratio
+    assert record["fit"]["c"]["low"] <= C <= record["fit"]["c"]["high"]
+    build_model(scene)  # the calibrated scene builds as any other
+
+
+def test_hinge_flag_sets_that_hinge_s_damping(tmp_path, rig, capsys):
+    path = write_recording(tmp_path / "swing.mcap", noisy_swing(rig, 7).theta)
+    out = tmp_path / "calibrated.yaml"
+    assert main(["calibrate", "--free-vibration", path, "--scene", "paper_4x4", "--hinge",
+                 "r1c1-r2c1", "--out", str(out), "--json"]) == 0
+    import json
+    record = json.loads(capsys.readouterr().out.splitlines()[0])
+    scene = load_scene(out)
+    c = scene.hinges.damping_overrides["r1c1-r2c1"]
+    assert c == pytest.approx(C, rel=0.02) and c == record["fit"]["c"]["value"]
+    assert scene.hinges.damping_ratio == load_scene(out).hinges.damping_ratio == 0.043
+    model = build_model(scene)
+    assert {h.name: h.c for h in model.hinges}["r1c1-r2c1"] == pytest.approx(c)
+
+
+def test_calibration_section_must_be_a_mapping():
+    with pytest.raises(Exception, match="calibration: expected a mapping"):
+        scene_from_dict({**RIG, "calibration": "fitted"})
+
+
+@pytest.mark.parametrize("case, expected", [
+    ("missing", "cannot read the recording"),
+    ("array", "not one panel on one hinge: its scene has 12 bodies and 12 hinges"),
+    ("motionless", "motionless"),
+    ("few_peaks", "too few peaks"),
+    ("stop", "reaches a joint stop"),
+])
+def test_bad_recordings_are_refused_in_one_line(tmp_path, rig, capsys, case, expected):
+    t = np.arange(0.0, DURATION, 1.0 / RATE)
+    noise = np.random.default_rng(3).normal(0.0, NOISE, t.size)
+    if case == "missing":
+        path = str(tmp_path / "none.mcap")
+    elif case == "array":
+        from pathlib import Path
+        path = str(Path(__file__).parent.parent / "bags" / "paper_4x4_uniform.mcap")
+    else:
+        theta = {"motionless": 0.5 + noise,
+                 "few_peaks": closed_form(rig, t, c=0.003) + noise,  # zeta 0.6: one swing
+                 "stop": closed_form(rig, t, equilibrium=0.2, amplitude=0.4) + noise}[case]
+        path = write_recording(tmp_path / f"{case}.mcap", theta)
+    good = write_recording(tmp_path / "good.mcap", noisy_swing(rig, 0).theta)
+    out = tmp_path / "out.yaml"
+    assert main(["calibrate", "--free-vibration", good, path, "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and not out.exists()  # refused before any work
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"panel-deploy: error: {path}: ")
+    assert expected in lines[0]

@@ -175,21 +175,26 @@ def _vertex(t, theta, j, half):
 
 
 def find_peaks(swing: Swing) -> Peaks:
-    """The swing's alternating peaks and troughs above :data:`PEAK_SNR` x noise."""
+    """The swing's alternating peaks and troughs above :data:`PEAK_SNR` x noise.
+
+    The first and the last excursion are left out: the first holds the
+    release (a hand lets go over some ms, perhaps after holding the panel
+    still) or starts mid-swing, the last may be cut by the record's end.
+    """
     t, theta = swing.t, swing.theta
     noise = max(noise_level(theta), 1e-12 * max(1.0, float(np.ptp(theta))))
     centre = float(np.median(theta))
     band = 5.0 * noise
     values = times = np.empty(0)
     for _ in range(2):  # the median, then the peaks' own equilibrium, as the centre
-        lobes = _lobes(theta, centre, band)
-        if len(lobes) < 2:
+        inner = _lobes(theta, centre, band)[1:-1]
+        if not inner:
             break
-        dt = float(np.median(np.diff(t)))
-        spans = [t[min(b, len(t) - 1)] - t[a] for a, b, _ in lobes[1:-1]] or [t[-1] - t[0]]
-        half = max(1, int(round(2.0 * float(np.median(spans)) / 16.0 / dt)))
+        # a parabola over +- a sixteenth of the period (an inner lobe lasts half of one)
+        half_period = float(np.median([t[b] - t[a] for a, b, _ in inner]))
+        half = max(1, int(round(half_period / 8.0 / float(np.median(np.diff(t))))))
         extrema = [_vertex(t, theta, a + int(np.argmax(s * theta[a:b])), half)
-                   for a, b, s in lobes]
+                   for a, b, s in inner]
         times = np.array([e[0] for e in extrema])
         values = np.array([e[1] for e in extrema])
         centre = _equilibrium(values, centre)
@@ -241,7 +246,7 @@ def check_swing(swing: Swing, rig: Rig) -> Peaks:
     if len(peaks.t) < MIN_PEAKS:
         raise TrajectoryError(f"{src}: too few peaks: {len(peaks.t)} peaks and troughs above "
                               f"{PEAK_SNR:g} x the noise ({peaks.noise:.2g} rad), at least "
-                              f"{MIN_PEAKS} needed (two and a half swings)")
+                              f"{MIN_PEAKS} needed (two swings after the release)")
     return peaks
 
 

@@ -83,6 +83,21 @@ def test_closed_form_recovers_c_within_2_percent_both_ways(rig):
     assert fit.equilibrium == pytest.approx(0.6, abs=1e-3)
 
 
+def test_a_held_release_and_a_record_started_mid_swing_are_read_alike(rig):
+    """A hand holds the panel 0.4 s before letting go; another record starts
+    0.13 s after the release: the release and the cut swing are left out."""
+    t = np.arange(0.0, DURATION, 1.0 / RATE)
+    noise = np.random.default_rng(9).normal(0.0, NOISE, t.size)
+    held = np.where(t < 0.4, closed_form(rig, 0.0), closed_form(rig, np.maximum(t - 0.4, 0.0)))
+    late = closed_form(rig, t + 0.13)
+    for theta in (held + noise, late + noise):
+        swing = fv.Swing("test", t, theta)
+        peaks = fv.check_swing(swing, rig)
+        fit = fv.fit_swing(swing, rig, peaks, fv.log_decrement(swing, rig, peaks))
+        assert fit.c.value == pytest.approx(C, rel=0.02)
+        assert fit.rms == pytest.approx(NOISE, rel=0.1)
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_pooled_interval_covers_the_truth(rig, seed):
     readings = []

@@ -17,7 +17,8 @@ largest), how often the 95 % intervals cover the truth (per test and pooled), an
 the pooled tests' agreement. ``--bags`` also writes the simulated rig's three tests
 (seed 1) as ``bags/free_vibration_rig_{1,2,3}.mcap``.
 
-    python bench/bench_free_vibration.py [--seeds 20] [--bags] [--out bench/results/free_vibration.txt]
+    python bench/bench_free_vibration.py [--seeds 20] [--bags]
+                                         [--out bench/results/free_vibration.txt]
 """
 
 from __future__ import annotations
@@ -120,7 +121,8 @@ def study(name, truth, k_true, make, seeds, lines):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
-    parser.add_argument("--bags", action="store_true", help="write bags/free_vibration_rig_*.mcap")
+    parser.add_argument("--bags", action="store_true",
+                        help="write bags/free_vibration_rig_*.mcap")
     parser.add_argument("--out", default=str(ROOT / "bench" / "results" / "free_vibration.txt"))
     args = parser.parse_args(argv)
     seeds = list(range(1, args.seeds + 1))

@@ -470,7 +470,7 @@ def fit_swing(swing: Swing, rig: Rig, peaks: Peaks, start: Analysis,
         corr = float(cov[0, 5] / np.sqrt(cov[0, 0] * cov[5, 5]))
         if se_cd > DRAG_SE_LIMIT or abs(corr) > COLLINEAR:
             refit = fit_swing(swing, rig, peaks, start, fit_drag=False)
-            why = (f"drag not identifiable from this record (C_d = {sol.x[5]:.3g} +- "
+            why = (f"drag not identifiable from this record (C_d = {round(sol.x[5], 3):g} +- "
                    f"{se_cd:.2g}, correlation with c {corr:+.3f}): c and k given the scene's "
                    f"C_d = {rig.drag_coefficient:g}")
             return replace(refit, notes=(why, *refit.notes))

@@ -1,6 +1,9 @@
 """Free-vibration tests (``panel-deploy calibrate --free-vibration``): c and k of a
 hinge spring from recordings of one panel swinging on one hinge."""
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -18,6 +21,7 @@ RIG = {"name": "rig", "array": {"rows": 2, "cols": 2, "length": 0.1, "width": 0.
 K, C = 0.1, 0.0005          # N m/rad, N m s/rad of one spring: zeta about 0.1
 NOISE = 1e-3                # rad
 RATE, DURATION = 200.0, 3.0  # Hz, s
+BAGS = Path(__file__).resolve().parent.parent / "bags"
 
 
 @pytest.fixture(scope="module")
@@ -131,7 +135,6 @@ def test_hinge_flag_sets_that_hinge_s_damping(tmp_path, rig, capsys):
     out = tmp_path / "calibrated.yaml"
     assert main(["calibrate", "--free-vibration", path, "--scene", "paper_4x4", "--hinge",
                  "r1c1-r2c1", "--out", str(out), "--json"]) == 0
-    import json
     record = json.loads(capsys.readouterr().out.splitlines()[0])
     scene = load_scene(out)
     c = scene.hinges.damping_overrides["r1c1-r2c1"]
@@ -147,6 +150,21 @@ def test_the_closed_form_is_refused_where_it_does_not_hold(rig):
     heavy = fv.rig_of(build_model(scene_from_dict({**RIG, "gravity": [0, 0, -9.81]})))
     with pytest.raises(ModelError, match="without weight and air"):
         fv.released(heavy, [0.0], C, K, 0.6, 0.4)
+
+
+def test_the_sample_recordings_calibrate_the_paper_scene(tmp_path, capsys):
+    """bags/free_vibration_rig_*.mcap: the shipped rig (weight, air) swung by the
+    simulator, c = 0.0043 N m s/rad and k = 0.1 N m/rad per spring."""
+    bags = sorted(str(p) for p in BAGS.glob("free_vibration_rig_*.mcap"))
+    assert len(bags) == 3
+    out = tmp_path / "calibrated.yaml"
+    assert main(["calibrate", "--free-vibration", *bags, "--scene", "paper_4x4", "--out",
+                 str(out)]) == 0
+    assert "drag not identifiable" in capsys.readouterr().out
+    fit = load_scene(out).data["calibration"]["fit"]
+    assert fit["c"]["low"] <= 0.0043 <= fit["c"]["high"]
+    assert fit["c"]["value"] == pytest.approx(0.0043, rel=0.02)
+    assert fit["ratio"]["value"] == pytest.approx(0.043, rel=0.02)
 
 
 def test_calibration_section_must_be_a_mapping():
@@ -167,8 +185,7 @@ def test_bad_recordings_are_refused_in_one_line(tmp_path, rig, capsys, case, exp
     if case == "missing":
         path = str(tmp_path / "none.mcap")
     elif case == "array":
-        from pathlib import Path
-        path = str(Path(__file__).parent.parent / "bags" / "paper_4x4_uniform.mcap")
+        path = str(BAGS / "paper_4x4_uniform.mcap")
     else:
         theta = {"motionless": 0.5 + noise,
                  "few_peaks": closed_form(rig, t, c=0.003) + noise,  # zeta 0.58: one swing

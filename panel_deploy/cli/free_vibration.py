@@ -7,7 +7,7 @@ import json
 
 import yaml
 
-from ..errors import SceneError
+from ..errors import SceneError, shown
 from ..validate import write_atomic
 from .args import scene_of
 
@@ -29,14 +29,15 @@ def free_vibration_command(args) -> int:
     calibration as one object) and write ``--out``. Exit 1 when no test could
     be fitted."""
     from ..build import build_model
-    from ..free_vibration import calibrate, calibrated_scene, calibration_record, read_swing, report_text
+    from ..free_vibration import (calibrate, calibrated_scene, calibration_record, read_swing,
+                                  report_text)
 
     readings = [read_swing(path, args.rig_scene, args.namespace) for path in args.free_vibration]
     scene = _target_scene(args) if args.out or args.hinge else None
     if args.hinge:
         names = [h.name for h in build_model(scene).hinges]
         if args.hinge not in names:
-            raise SceneError("--hinge", f"{args.hinge!r} is no hinge of the scene (hinges: "
+            raise SceneError("--hinge", f"{shown(args.hinge)} is no hinge of the scene (hinges: "
                                         f"{', '.join(names)})")
     cal = calibrate(readings)
     if args.json:

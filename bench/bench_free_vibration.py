@@ -109,7 +109,8 @@ def study(name, truth, k_true, make, seeds, lines):
     lines.append(f"  pooled fit covers c in {pooled_covered}/{len(seeds)} seeds; tests disagree "
                  f"(chi2 p < 0.05) in {disagree}; seed {seeds[0]}: fit {fit_pool.value:.6g} "
                  f"[{fit_pool.low:.6g}, {fit_pool.high:.6g}], log decrement "
-                 f"{decrement_pool.value:.6g} [{decrement_pool.low:.6g}, {decrement_pool.high:.6g}]")
+                 f"{decrement_pool.value:.6g} "
+                 f"[{decrement_pool.low:.6g}, {decrement_pool.high:.6g}]")
     if drags:
         d = np.array(drags)
         inside = int(np.sum((d[:, 1] <= 1.17) & (1.17 <= d[:, 2])))

@@ -416,8 +416,9 @@ class _Response:
 
 def fit_swing(swing: Swing, rig: Rig, peaks: Peaks, start: Analysis,
               fit_drag: bool | None = None) -> Analysis:
-    """c, k (and C_d) of one spring by weighted least squares of the model's
-    free response on the recorded angles from the first peak on.
+    """c, k (and C_d) of one spring by least squares of the model's free
+    response on the recorded angles from the first peak on, every sample
+    weighted alike (an encoder's noise does not depend on the angle).
 
     ``start`` (the log decrement) gives the starting point. ``fit_drag``
     None fits C_d when the rig has air and keeps it only if identified (see

@@ -135,7 +135,7 @@ def test_hinge_flag_sets_that_hinge_s_damping(tmp_path, rig, capsys):
     out = tmp_path / "calibrated.yaml"
     assert main(["calibrate", "--free-vibration", path, "--scene", "paper_4x4", "--hinge",
                  "r1c1-r2c1", "--out", str(out), "--json"]) == 0
-    record = json.loads(capsys.readouterr().out.splitlines()[0])
+    record = json.loads(capsys.readouterr().out)  # standard output is that one object
     scene = load_scene(out)
     c = scene.hinges.damping_overrides["r1c1-r2c1"]
     assert c == pytest.approx(C, rel=0.02) and c == record["fit"]["c"]["value"]
@@ -165,6 +165,23 @@ def test_the_sample_recordings_calibrate_the_paper_scene(tmp_path, capsys):
     assert fit["c"]["low"] <= 0.0043 <= fit["c"]["high"]
     assert fit["c"]["value"] == pytest.approx(0.0043, rel=0.02)
     assert fit["ratio"]["value"] == pytest.approx(0.043, rel=0.02)
+
+
+@pytest.mark.parametrize("flags, named", [
+    (["--scene", "paper_4x4"], "--scene"),
+    (["--hinge", "r1c1-r2c1"], "--hinge"),
+    (["--set", "hinges.stiffness=0.2"], "--set"),
+])
+def test_flags_that_shape_the_written_scene_need_out(tmp_path, capsys, flags, named):
+    assert main(["calibrate", "--free-vibration", str(tmp_path / "a.mcap"), *flags]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"panel-deploy: error: {named}: only with --out CALIBRATED.yaml (the scene it shapes)")
+
+
+def test_an_unknown_hinge_is_refused_before_any_recording_is_read(tmp_path, capsys):
+    assert main(["calibrate", "--free-vibration", str(tmp_path / "none.mcap"), "--scene",
+                 "paper_4x4", "--hinge", "h9", "--out", str(tmp_path / "out.yaml")]) == 2
+    assert "--hinge: 'h9' is no hinge of the scene (hinges: r1c1-r1c2," in capsys.readouterr().err
 
 
 def test_calibration_section_must_be_a_mapping():

@@ -186,6 +186,11 @@ def _replay(args):
 
 
 def _calibrate(args):
+    if args.out is None:
+        # these only shape the scene --out writes: without it they would be ignored
+        for flag, given in (("--scene", args.scene), ("--hinge", args.hinge), ("--set", args.set)):
+            if given:
+                raise SceneError(flag, "only with --out CALIBRATED.yaml (the scene it shapes)")
     for recording in args.free_vibration:
         if args.out is not None and _same_file(args.out, recording):
             raise SceneError("--out", f"{args.out} is also the recording {recording}: writing it "

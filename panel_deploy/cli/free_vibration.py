@@ -24,21 +24,21 @@ def _target_scene(args):
 
 
 def free_vibration_command(args) -> int:
-    """Read and check every recording and the scene first (one line and exit 2
-    for the first bad one), then analyse, print the report (``--json``: the
-    calibration as one object) and write ``--out``. Exit 1 when no test could
-    be fitted."""
+    """Read and check the scene to write and every recording first (one line
+    and exit 2 for the first bad one), then analyse, print the report
+    (``--json``: the calibration as one object) and write ``--out``. Exit 1
+    when no test could be fitted."""
     from ..build import build_model
     from ..free_vibration import (calibrate, calibrated_scene, calibration_record, read_swing,
                                   report_text)
 
-    readings = [read_swing(path, args.rig_scene, args.namespace) for path in args.free_vibration]
-    scene = _target_scene(args) if args.out or args.hinge else None
+    scene = _target_scene(args) if args.out else None
     if args.hinge:
         names = [h.name for h in build_model(scene).hinges]
         if args.hinge not in names:
             raise SceneError("--hinge", f"{shown(args.hinge)} is no hinge of the scene (hinges: "
                                         f"{', '.join(names)})")
+    readings = [read_swing(path, args.rig_scene, args.namespace) for path in args.free_vibration]
     cal = calibrate(readings)
     if args.json:
         print(json.dumps(calibration_record(cal, args.hinge)))
@@ -51,6 +51,7 @@ def free_vibration_command(args) -> int:
         text = ("# Calibrated by panel-deploy calibrate --free-vibration: see the calibration "
                 "section.\n" + yaml.safe_dump(data, sort_keys=False))
         write_atomic(args.out, lambda f: f.write(text), "--out")
-        what = f"hinges.damping_overrides.{args.hinge}" if args.hinge else "hinges.damping_ratio"
-        print(f"{what} -> {args.out}")
+        if not args.json:  # standard output stays one JSON object
+            what = f"hinges.damping_overrides.{args.hinge}" if args.hinge else "hinges.damping_ratio"
+            print(f"{what} -> {args.out}")
     return 0

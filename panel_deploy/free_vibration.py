@@ -550,7 +550,7 @@ def read_swing(path, rig_scene: str | None = None, namespace: str | None = None)
     """
     from .record.analysis import read_deployment
 
-    d = read_deployment(path, rig_scene, namespace)
+    d = read_deployment(path, rig_scene, namespace, scene_flag="--rig")
     rig = rig_of(d.model, str(path))
     swing = Swing(str(path), d.track.t, d.track.theta[:, 0])
     return swing, rig, check_swing(swing, rig)
@@ -632,7 +632,9 @@ def calibration_record(cal: Calibration, hinge: str | None = None) -> dict:
 def calibrated_scene(data: dict, cal: Calibration, hinge: str | None = None) -> dict:
     """Scene ``data`` with the pooled fit's damping: ``hinges.damping_ratio``
     = c/k, or with ``hinge`` that hinge's ``hinges.damping_overrides`` entry =
-    c (N m s/rad, one spring); and the ``calibration`` section."""
+    c (N m s/rad, one spring); and :func:`calibration_record` as the
+    ``calibration`` section's ``free_vibration`` entry, beside what other
+    calibrations of the scene wrote there."""
     out = dict(data)
     hinges = dict(out.get("hinges") or {})
     if hinge is None:
@@ -641,7 +643,8 @@ def calibrated_scene(data: dict, cal: Calibration, hinge: str | None = None) -> 
         hinges["damping_overrides"] = {**(hinges.get("damping_overrides") or {}),
                                        hinge: cal.fit["c"].estimate.figures()["value"]}
     out["hinges"] = hinges
-    out["calibration"] = calibration_record(cal, hinge)
+    out["calibration"] = {**(out.get("calibration") or {}),
+                          "free_vibration": calibration_record(cal, hinge)}
     return out
 
 
@@ -706,10 +709,11 @@ def released(rig: Rig, t, c: float, k: float, equilibrium: float, amplitude: flo
         np.cos(wd * t) + zeta * wn / wd * np.sin(wd * t))
 
 
-def record_swing(path, scene, t, theta, t0: float = 0.0) -> None:
+def record_swing(path, scene, t, theta, t0: float = 0.0, carry_scene: bool = True) -> None:
     """Write a swing of ``scene``'s one hinge as a recording: ``theta`` (rad)
-    at ``t`` (s, stamped from ``t0``) on ``/joint_states`` and the scene on
-    ``panel_deploy/model``, as a real rig's recording with its scene would be."""
+    at ``t`` (s, stamped from ``t0``) on ``/joint_states``, and the scene on
+    ``panel_deploy/model`` unless ``carry_scene`` is False (a real rig's
+    ``ros2 bag record /joint_states``, read with ``--rig``)."""
     from . import contract
     from .build import build_model
     from .record import messages
@@ -719,7 +723,8 @@ def record_swing(path, scene, t, theta, t0: float = 0.0) -> None:
     name = rig_of(build_model(scene), str(path)).hinge
     empty = np.zeros(0)
     with DeploymentWriter(path) as rec:
-        rec.write(contract.MODEL, messages.string(scene_yaml(scene)))
+        if carry_scene:
+            rec.write(contract.MODEL, messages.string(scene_yaml(scene)))
         for time, value in zip(t, theta):
             rec.write(contract.JOINT_STATES,
                       messages.joint_state([name], t0 + time, [value], empty, empty))

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from panel_deploy import free_vibration as fv
 from panel_deploy.build import build_model
@@ -39,9 +40,10 @@ def noisy_swing(rig, seed, **kwargs):
     return fv.Swing(f"seed{seed}", t, theta)
 
 
-def write_recording(path, theta):
-    """A recording of the rig's joint states at RATE, carrying the rig scene."""
-    fv.record_swing(path, scene_from_dict(RIG), np.arange(len(theta)) / RATE, theta, t0=1000.0)
+def write_recording(path, theta, carry_scene=True):
+    """A recording of the rig's joint states at RATE (with the rig scene unless not to)."""
+    fv.record_swing(path, scene_from_dict(RIG), np.arange(len(theta)) / RATE, theta, t0=1000.0,
+                    carry_scene=carry_scene)
     return str(path)
 
 
@@ -123,11 +125,29 @@ def test_calibrate_writes_a_scene_that_reloads(tmp_path, rig, capsys):
     scene = load_scene(out)
     assert scene.hinges.damping_ratio == pytest.approx(C / K, rel=0.02)
     assert scene.name == "paper_4x4" and scene.hinges.stiffness == 0.1  # the rest untouched
-    record = scene.data["calibration"]
+    record = scene.data["calibration"]["free_vibration"]
     assert [t["recording"] for t in record["tests"]] == paths
     assert record["fit"]["ratio"]["value"] == scene.hinges.damping_ratio
     assert record["fit"]["c"]["low"] <= C <= record["fit"]["c"]["high"]
     build_model(scene)  # the calibrated scene builds as any other
+
+
+def test_a_recording_without_its_scene_is_read_with_rig(tmp_path, rig, capsys):
+    """A real rig's ``ros2 bag record /joint_states``: the rig's scene from --rig,
+    and a scene's earlier calibrations kept beside this one."""
+    path = write_recording(tmp_path / "bare.mcap", noisy_swing(rig, 5).theta, carry_scene=False)
+    out = tmp_path / "calibrated.yaml"
+    assert main(["calibrate", "--free-vibration", path, "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip().endswith("name its scene with --rig SCENE")
+    (tmp_path / "rig.yaml").write_text(yaml.safe_dump(RIG))
+    target = tmp_path / "target.yaml"
+    target.write_text(yaml.safe_dump({**RIG, "calibration": {"deployment": {"rms": 0.01}}}))
+    assert main(["calibrate", "--free-vibration", path, "--rig", str(tmp_path / "rig.yaml"),
+                 "--scene", str(target), "--out", str(out)]) == 0
+    scene = load_scene(out)
+    assert scene.hinges.damping_ratio == pytest.approx(C / K, rel=0.02)
+    assert scene.data["calibration"]["deployment"] == {"rms": 0.01}
+    assert "free_vibration" in scene.data["calibration"]
 
 
 def test_hinge_flag_sets_that_hinge_s_damping(tmp_path, rig, capsys):
@@ -161,7 +181,7 @@ def test_the_sample_recordings_calibrate_the_paper_scene(tmp_path, capsys):
     assert main(["calibrate", "--free-vibration", *bags, "--scene", "paper_4x4", "--out",
                  str(out)]) == 0
     assert "drag not identifiable" in capsys.readouterr().out
-    fit = load_scene(out).data["calibration"]["fit"]
+    fit = load_scene(out).data["calibration"]["free_vibration"]["fit"]
     assert fit["c"]["low"] <= 0.0043 <= fit["c"]["high"]
     assert fit["c"]["value"] == pytest.approx(0.0043, rel=0.02)
     assert fit["ratio"]["value"] == pytest.approx(0.043, rel=0.02)

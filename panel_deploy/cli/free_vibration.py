@@ -20,7 +20,7 @@ def _target_scene(args):
     from ..record.analysis import recorded_scene
 
     return recorded_scene(args.free_vibration[0], args.rig_scene, args.namespace,
-                          overrides=args.set or ())[1]
+                          overrides=args.set or (), scene_flag="--rig")[1]
 
 
 def free_vibration_command(args) -> int:

@@ -43,6 +43,8 @@ MOTION_SNR = 50.0
 #: not almost collinear with the damping's.
 DRAG_SE_LIMIT = 0.25
 COLLINEAR = 0.98
+#: The fit searches c and k within this (natural log) of its start, a factor 1000.
+SPAN = np.log(1000.0)
 #: Confidence level of every interval.
 LEVEL = 0.95
 
@@ -247,6 +249,10 @@ def check_swing(swing: Swing, rig: Rig) -> Peaks:
         raise TrajectoryError(f"{src}: too few peaks: {len(peaks.t)} peaks and troughs above "
                               f"{PEAK_SNR:g} x the noise ({peaks.noise:.2g} rad), at least "
                               f"{MIN_PEAKS} needed (two swings after the release)")
+    delta = _decrement(peaks)[0]
+    if not delta > 0:
+        raise TrajectoryError(f"{src}: the swing does not decay (log decrement {delta:.3g}): "
+                              f"not the free vibration of a damped spring")
     return peaks
 
 
@@ -324,6 +330,14 @@ def _regression(x, y):
     return float(coef[0]), float(coef[1]), float(np.sqrt(cov[0, 0])), float(np.sqrt(s2))
 
 
+def _decrement(peaks: Peaks) -> tuple:
+    """delta, its standard error and the scatter of the ln peak-to-peak
+    amplitudes about their regression line on the half-cycle count."""
+    d = np.abs(np.diff(peaks.theta))
+    slope, _, se_slope, scatter = _regression(np.arange(len(d), dtype=float), np.log(d))
+    return -2.0 * slope, 2.0 * se_slope, scatter
+
+
 def log_decrement(swing: Swing, rig: Rig, peaks: Peaks) -> Analysis:
     """c and k of one spring from the peaks' decay and spacing.
 
@@ -335,25 +349,23 @@ def log_decrement(swing: Swing, rig: Rig, peaks: Peaks) -> Analysis:
     and n k = I omega_n^2 + dG/dtheta at the equilibrium. With air the decrement
     counts the drag as damping.
     """
-    d = np.abs(np.diff(peaks.theta))
-    j = np.arange(len(d), dtype=float)
-    slope, _, se_slope, scatter = _regression(j, np.log(d))
+    delta, se_delta, scatter = _decrement(peaks)
     half_period, _, se_half, _ = _regression(np.arange(len(peaks.t), dtype=float), peaks.t)
-    delta, se_delta = -2.0 * slope, 2.0 * se_slope
     period, se_period = 2.0 * half_period, 2.0 * se_half
-    if not delta > 0:
-        return Analysis(swing.source, "log decrement", False,
-                        f"the peaks do not decay (delta = {delta:.3g})", peaks=len(peaks.t))
     n, inertia = rig.springs, rig.inertia
     zeta = delta / np.sqrt(4 * np.pi ** 2 + delta ** 2)
     k_eff = inertia * (4 * np.pi ** 2 + delta ** 2) / period ** 2
     k_hinge = k_eff + float(rig.gravity_gradient(peaks.equilibrium))
+    if not k_hinge > 0:  # a hinge without a spring, swung by the weight alone
+        return Analysis(swing.source, "log decrement", False,
+                        f"the weight alone explains the swing's frequency (n k = {k_hinge:.3g} "
+                        f"N m/rad): no spring stiffness to measure", peaks=len(peaks.t))
     c_hinge = 2.0 * inertia * delta / period
     # first-order propagation of delta's and T_d's errors (two separate regressions)
     g_c = np.array([1.0 / delta, -1.0 / period])
     g_k = k_eff / k_hinge * np.array([2 * delta / (4 * np.pi ** 2 + delta ** 2), -2.0 / period])
     cov = np.diag([se_delta ** 2, se_period ** 2])
-    dof = len(d) - 2
+    dof = len(peaks.t) - 3  # the regression of len(peaks.t) - 1 amplitudes
 
     def estimate(value, gradient):
         return Estimate.from_log(np.log(value), float(np.sqrt(gradient @ cov @ gradient)), dof)
@@ -437,7 +449,10 @@ def fit_swing(swing: Swing, rig: Rig, peaks: Peaks, start: Analysis,
     c0 = start.c.value if start.success else max(rig.c, 1e-9)
     k0 = start.k.value if start.success else max(rig.k, 1e-9)
     x0 = [np.log(c0), np.log(k0), peaks.equilibrium, theta[0], 0.0]
-    lower, upper = [-np.inf] * 5, [np.inf] * 5
+    # c and k within SPAN of the start: a trust-region step far out (k x 1e4) makes
+    # the response so stiff that one integration takes minutes
+    lower = [x0[0] - SPAN, x0[1] - SPAN] + [-np.inf] * 3
+    upper = [x0[0] + SPAN, x0[1] + SPAN] + [np.inf] * 3
     if fit_drag:
         x0.append(max(rig.drag_coefficient, 0.5))
         lower.append(0.0)
@@ -456,6 +471,10 @@ def fit_swing(swing: Swing, rig: Rig, peaks: Peaks, start: Analysis,
         return Analysis(swing.source, "fit", False, f"the fit failed ({e})", peaks=len(peaks.t))
     if not sol.success:
         return Analysis(swing.source, "fit", False, f"the fit did not converge ({sol.message})",
+                        peaks=len(peaks.t))
+    if np.any(sol.active_mask[:2]):
+        return Analysis(swing.source, "fit", False, "the fit ran to the edge of its search (c or k "
+                        "a factor 1000 from its start): the model does not describe this record",
                         peaks=len(peaks.t))
     dof = len(t) - len(sol.x)
     rms = float(np.sqrt(np.mean(sol.fun ** 2)))

@@ -104,6 +104,16 @@ def test_pooled_interval_covers_the_truth(rig, seed):
     assert cal.log_decrement["c"].estimate.value == pytest.approx(C, rel=0.02)
 
 
+def test_a_swing_the_model_cannot_describe_says_so(rig):
+    """Dry friction: the amplitude falls linearly, not geometrically."""
+    t = np.arange(0.0, DURATION, 1.0 / RATE)
+    theta = 0.6 + np.maximum(0.4 - 0.1 * t, 0.0) * np.cos(38.6 * t)
+    swing = fv.Swing("dry", t, theta + np.random.default_rng(2).normal(0.0, NOISE, t.size))
+    peaks = fv.check_swing(swing, rig)
+    fit = fv.fit_swing(swing, rig, peaks, fv.log_decrement(swing, rig, peaks))
+    assert fit.rms > 3 * NOISE and "the model misses the record" in fit.notes[0]
+
+
 def test_pool_flags_tests_that_disagree():
     tight = [fv.Estimate.from_log(np.log(v), 0.001, 100) for v in (1.0, 1.1, 0.9)]
     pooled = fv.pool(tight)
@@ -215,6 +225,7 @@ def test_calibration_section_must_be_a_mapping():
     ("motionless", "motionless"),
     ("few_peaks", "too few peaks"),
     ("stop", "reaches a joint stop"),
+    ("growing", "the swing does not decay"),
 ])
 def test_bad_recordings_are_refused_in_one_line(tmp_path, rig, capsys, case, expected):
     t = np.arange(0.0, DURATION, 1.0 / RATE)
@@ -226,7 +237,8 @@ def test_bad_recordings_are_refused_in_one_line(tmp_path, rig, capsys, case, exp
     else:
         theta = {"motionless": 0.5 + noise,
                  "few_peaks": closed_form(rig, t, c=0.003) + noise,  # zeta 0.58: one swing
-                 "stop": closed_form(rig, t, equilibrium=0.2, amplitude=0.4) + noise}[case]
+                 "stop": closed_form(rig, t, equilibrium=0.2, amplitude=0.4) + noise,
+                 "growing": 0.6 + 0.05 * np.exp(0.5 * t) * np.cos(38.0 * t) + noise}[case]
         path = write_recording(tmp_path / f"{case}.mcap", theta)
     good = write_recording(tmp_path / "good.mcap", noisy_swing(rig, 0).theta)
     out = tmp_path / "out.yaml"

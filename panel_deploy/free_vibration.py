@@ -138,7 +138,9 @@ def noise_level(theta) -> float:
 
 @dataclass(frozen=True)
 class Peaks:
-    """Alternating extrema of a swing: times (s) and values (rad), in order."""
+    """Alternating extrema of a swing: times (s) and values (rad), in order;
+    the record's noise (standard deviation, rad) and the equilibrium the
+    extrema decay towards (rad)."""
 
     t: np.ndarray
     theta: np.ndarray
@@ -227,8 +229,8 @@ def check_swing(swing: Swing, rig: Rig) -> Peaks:
     ------
     TrajectoryError
         One line naming the file: too few samples, motionless, reaching a
-        joint stop (0 or pi rad), or fewer than :data:`MIN_PEAKS` peaks above
-        the noise.
+        joint stop (0 or pi rad), fewer than :data:`MIN_PEAKS` peaks above
+        the noise, or peaks that do not decay.
     """
     src, theta = swing.source, swing.theta
     if len(theta) < 20:
@@ -237,8 +239,8 @@ def check_swing(swing: Swing, rig: Rig) -> Peaks:
     noise = noise_level(theta)
     span = float(np.ptp(theta))
     if span <= MOTION_SNR * noise or span < 1e-9:
-        raise TrajectoryError(f"{src}: motionless: {rig.hinge} spans {span:.3g} rad, within "
-                              f"the noise ({noise:.2g} rad)")
+        raise TrajectoryError(f"{src}: motionless: {rig.hinge} spans {span:.3g} rad, less than "
+                              f"{MOTION_SNR:g} x its noise ({noise:.2g} rad)")
     low, high = float(theta.min()), float(theta.max())
     if low < -3 * noise or high > np.pi + 3 * noise:
         raise TrajectoryError(f"{src}: {rig.hinge} reaches a joint stop ({low:.3g} .. {high:.3g} "
@@ -290,8 +292,16 @@ class Estimate:
                    float(value) + half, log=False)
 
     def figures(self) -> dict:
-        """value, low and high to six significant digits, as plain floats."""
-        return {k: float(f"{getattr(self, k):.6g}") for k in ("value", "low", "high")}
+        """value, its standard error (``relative_se`` in log space, else
+        ``se``), low and high, as plain floats to six significant digits."""
+        se = "relative_se" if self.log else "se"
+        return {"value": float(f"{self.value:.6g}"), se: float(f"{self.se:.3g}"),
+                "low": float(f"{self.low:.6g}"), "high": float(f"{self.high:.6g}")}
+
+    def text(self) -> str:
+        """``value +- standard error [low, high]`` for the report."""
+        se = f"{self.se:.2%}" if self.log else f"{self.se:.2g}"
+        return f"{self.value:.5g} +- {se} [{self.low:.5g}, {self.high:.5g}]"
 
 
 @dataclass(frozen=True)
@@ -667,10 +677,8 @@ def calibrated_scene(data: dict, cal: Calibration, hinge: str | None = None) -> 
     return out
 
 
-def _line(label, e: Estimate | None, unit="") -> str:
-    if e is None:
-        return f"  {label:<6} -"
-    return f"  {label:<6} {e.value:.5g} [{e.low:.5g}, {e.high:.5g}] {unit}".rstrip()
+def _line(label, e: Estimate, unit="") -> str:
+    return f"  {label:<6} {e.text()} {unit}".rstrip()
 
 
 def report_text(cal: Calibration) -> str:

@@ -446,7 +446,8 @@ def fit_swing(swing: Swing, rig: Rig, peaks: Peaks, start: Analysis,
     None fits C_d when the rig has air and keeps it only if identified (see
     :data:`DRAG_SE_LIMIT`); otherwise the rig's own C_d is used and the
     notes say why. c and k are fitted in log space: they stay positive and
-    their intervals are relative, as their errors are.
+    their intervals are relative, as their errors are. C_d is fitted as it
+    is, within the scene's [0, 5]: no drag at all is a value it may take.
     """
     from scipy.optimize import least_squares
 

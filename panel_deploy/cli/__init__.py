@@ -158,6 +158,22 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--namespace", help="the array to show, in a recording of several (e.g. array1)")
     s.set_defaults(func=_command("replay", "replay_command"))
 
+    s = sub.add_parser("calibrate", help="hinge damping from recordings: free-vibration tests")
+    s.add_argument("--free-vibration", nargs="+", required=True, metavar="RECORDING.mcap",
+                   help="recordings of one panel swinging on one hinge: c and k per test "
+                        "(log decrement and fit) and pooled")
+    s.add_argument("--scene", help="the scene whose damping to set (file or shipped name); "
+                                   "default: the first recording's rig")
+    s.add_argument("--rig", dest="rig_scene", metavar="SCENE",
+                   help="the rig's scene (one panel on one hinge), for recordings that carry none")
+    s.add_argument("--hinge", help="set this hinge's damping_overrides entry to c instead of "
+                                   "the scene's damping_ratio to c/k")
+    s.add_argument("--out", metavar="CALIBRATED.yaml", help="write the calibrated scene")
+    s.add_argument("--namespace", help="the array whose joint states to read (e.g. array1)")
+    s.add_argument("--json", action="store_true", help="print the calibration as one JSON object")
+    add_set(s)
+    s.set_defaults(func=_command("free_vibration", "free_vibration_command"))
+
     s = sub.add_parser("export", help="export the model (MuJoCo MJCF)")
     s.add_argument("scene")
     s.add_argument("--mjcf", metavar="FILE.xml", required=True)

@@ -35,6 +35,7 @@ OUTPUTS = {
     "fold": (("plot", "--plot"),),
     "replay": (("save", "--save"), ("png", "--png")),
     "bench": (("out", "--out"), ("plot", "--plot")),
+    "calibrate": (("out", "--out"),),
 }
 
 
@@ -47,6 +48,7 @@ INPUTS = {
     "fold": (("scene", "--scene"),),
     "replay": (("recording", "recording"), ("scene", "--scene")),
     "bench": (("scene", "scene"),),
+    "calibrate": (("scene", "--scene"), ("rig_scene", "--rig")),
 }
 
 #: Output flags that write a picture, in the format of the file name's suffix.
@@ -183,4 +185,17 @@ def _replay(args):
                                            "choose a free one with --port") from None
 
 
-_CHECKS = {"fold": _fold, "optimise": _optimise, "bench": _bench, "replay": _replay}
+def _calibrate(args):
+    if args.out is None:
+        # these only shape the scene --out writes: without it they would be ignored
+        for flag, given in (("--scene", args.scene), ("--hinge", args.hinge), ("--set", args.set)):
+            if given:
+                raise SceneError(flag, "only with --out CALIBRATED.yaml (the scene it shapes)")
+    for recording in args.free_vibration:
+        if args.out is not None and _same_file(args.out, recording):
+            raise SceneError("--out", f"{args.out} is also the recording {recording}: writing it "
+                                      "would destroy the input; give another file")
+
+
+_CHECKS = {"fold": _fold, "optimise": _optimise, "bench": _bench, "replay": _replay,
+           "calibrate": _calibrate}

@@ -37,10 +37,11 @@ class RecordedDeployment:
 
 
 def recorded_scene(path, scene: str | None = None, namespace: str | None = None,
-                   overrides=()) -> tuple:
+                   overrides=(), scene_flag: str = "--scene") -> tuple:
     """``(recording, scene)``: the recording at ``path`` and the scene its
     deployment ran (``scene``, a file or shipped name, when given), with
-    ``overrides`` (``--set`` items) applied.
+    ``overrides`` (``--set`` items) applied. ``scene_flag`` is the flag that
+    names a scene, for the message when the recording has none.
 
     Raises
     ------
@@ -58,7 +59,7 @@ def recorded_scene(path, scene: str | None = None, namespace: str | None = None,
     if parsed is None:
         cut = f" (the file was cut short: {recording.truncated})" if recording.truncated else ""
         raise TrajectoryError(f"{path}: no {recording.topic(contract.MODEL)} in this "
-                              f"recording{cut}; name its scene with --scene SCENE")
+                              f"recording{cut}; name its scene with {scene_flag} SCENE")
     if not overrides:
         return recording, parsed
     data = apply_overrides(parsed.data, overrides)
@@ -69,7 +70,7 @@ def recorded_scene(path, scene: str | None = None, namespace: str | None = None,
 
 
 def read_deployment(path, scene: str | None = None, namespace: str | None = None,
-                    overrides=()) -> RecordedDeployment:
+                    overrides=(), scene_flag: str = "--scene") -> RecordedDeployment:
     """Open ``path`` and map its joint states onto the scene's hinges
     (:func:`recorded_scene` says which scene).
 
@@ -85,7 +86,7 @@ def read_deployment(path, scene: str | None = None, namespace: str | None = None
     """
     from ..build import build_model
 
-    recording, parsed = recorded_scene(path, scene, namespace, overrides)
+    recording, parsed = recorded_scene(path, scene, namespace, overrides, scene_flag)
     model = build_model(parsed)
     states = joint_states(recording, parsed.collision.stamps)
     track = hinge_track(states, model, path, parsed.name or str(parsed.source or ""))

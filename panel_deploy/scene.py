@@ -456,7 +456,9 @@ SECTIONS = {
     "optimisation": OptimisationSection,
 }
 TOP_LEVEL = {"gravity": (vector3, "m/s^2", "gravity in the flat array frame (y towards row 1)"),
-             "name": (None, "", "scene name"), "description": (None, "", "free text")}
+             "name": (None, "", "scene name"), "description": (None, "", "free text"),
+             "calibration": (None, "", "what panel-deploy calibrate fitted and from which "
+                                       "recordings (informational: no run reads it)")}
 
 
 def _parse_section(cls, data, path):
@@ -537,6 +539,9 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     for key in ("name", "description"):
         if key in data and not isinstance(data[key], str):
             raise SceneError(key, f"expected a string, got {_type_name(data[key])}")
+    if "calibration" in data and not isinstance(data["calibration"], dict):
+        raise SceneError("calibration", f"expected a mapping (as panel-deploy calibrate writes "
+                                        f"it), got {_type_name(data['calibration'])}")
     return Scene(**sections, gravity=gravity, name=data.get("name", ""),
                  description=data.get("description", ""), source=source, data=data)
 
@@ -653,5 +658,6 @@ def describe_schema() -> str:
                          "required" if f.default is None and name == "array" and f.name not in ("mass", "density")
                          else repr(f.default), f.metadata["doc"]))
     rows.append(("gravity", "[x, y, z]", "m/s^2", repr(Scene.gravity), TOP_LEVEL["gravity"][2]))
+    rows.append(("calibration", "mapping", "", "None", TOP_LEVEL["calibration"][2]))
     widths = [max(len(r[i]) for r in rows) for i in range(4)]
     return "\n".join("  ".join(r[i].ljust(widths[i]) for i in range(4)) + "  " + r[4] for r in rows)

@@ -142,6 +142,29 @@ def build_parser() -> argparse.ArgumentParser:
     add_set(s)
     s.set_defaults(func=_command("optimise", "optimise_command"))
 
+    s = sub.add_parser("calibrate", help="fit hinge damping, stiffness and air drag to recorded "
+                                         "deployments; write the calibrated scene")
+    s.add_argument("recordings", nargs="+", metavar="RECORDING",
+                   help="MCAP recordings of deployments of the same array (their /joint_states)")
+    s.add_argument("--scene", help="the array's scene (file or shipped name); default: the one "
+                                   "the first recording ran")
+    s.add_argument("--out", metavar="CALIBRATED.yaml", required=True,
+                   help="the scene with the fitted values and a calibration section")
+    s.add_argument("--fit", default="damping,stiffness", metavar="KIND,KIND",
+                   help="what to fit, comma-separated: damping, stiffness, drag "
+                        "(default damping,stiffness; drag needs air.density > 0)")
+    s.add_argument("--per", default="scale", metavar="scale|group",
+                   help="scale: one factor on every hinge's k and c (the c/k becomes "
+                        "hinges.damping_ratio); group: one per stiffness group")
+    s.add_argument("--plot", metavar="FILE.png", help="measured vs nominal vs fitted angles, residuals")
+    s.add_argument("--namespace", help="the array to fit, in recordings of several (e.g. array1)")
+    s.add_argument("--max-evaluations", type=int, default=50,
+                   help="residual evaluations of the fit at most (each iteration: one, plus "
+                        "a Jacobian of one simulation per parameter)")
+    s.add_argument("--quiet", action="store_true", help="no progress lines")
+    add_set(s)
+    s.set_defaults(func=_command("calibrate", "calibrate_command"))
+
     s = sub.add_parser("replay", help="replay a recording in rerun, or render it as a PNG strip")
     s.add_argument("recording", help="MCAP recording (simulate --record, run --record, ros2 bag record)")
     view = s.add_mutually_exclusive_group()

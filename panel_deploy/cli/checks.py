@@ -35,6 +35,7 @@ OUTPUTS = {
     "fold": (("plot", "--plot"),),
     "replay": (("save", "--save"), ("png", "--png")),
     "bench": (("out", "--out"), ("plot", "--plot")),
+    "calibrate": (("out", "--out"), ("plot", "--plot")),
 }
 
 
@@ -47,6 +48,7 @@ INPUTS = {
     "fold": (("scene", "--scene"),),
     "replay": (("recording", "recording"), ("scene", "--scene")),
     "bench": (("scene", "scene"),),
+    "calibrate": (("recordings", "RECORDING"), ("scene", "--scene")),
 }
 
 #: Output flags that write a picture, in the format of the file name's suffix.
@@ -61,7 +63,7 @@ def check_args(args) -> None:
     outputs = [(getattr(args, attr, None), flag) for attr, flag in OUTPUTS.get(command, ())]
     inputs = [(resolve_scene(path) if "scene" in attr else path, flag)
               for attr, flag in INPUTS.get(command, ())
-              if (path := getattr(args, attr, None)) is not None]
+              for path in _given(getattr(args, attr, None))]
     earlier = []
     args.stdout_output = None  # the flag writing standard output: human lines go to stderr
     for path, flag in outputs:
@@ -87,6 +89,13 @@ def check_args(args) -> None:
     check = _CHECKS.get(command)
     if check is not None:
         check(args)
+
+
+def _given(value) -> list:
+    """The paths an argument holds: none, one, or a list (several positional files)."""
+    if value is None:
+        return []
+    return list(value) if isinstance(value, list) else [value]
 
 
 def _same_file(output, other) -> bool:
@@ -183,4 +192,23 @@ def _replay(args):
                                            "choose a free one with --port") from None
 
 
-_CHECKS = {"fold": _fold, "optimise": _optimise, "bench": _bench, "replay": _replay}
+def _calibrate(args):
+    from ..calibrate.parameters import KINDS, PER
+
+    kinds = [kind.strip() for kind in str(args.fit).split(",")]
+    for kind in kinds:
+        if kind not in KINDS:
+            raise SceneError("--fit", f"no parameter {shown(kind)} to fit (expected some of "
+                                      f"{', '.join(KINDS)}, comma-separated)")
+    if len(set(kinds)) != len(kinds):
+        raise SceneError("--fit", f"{shown(args.fit)} names a parameter twice")
+    args.fit = ",".join(kinds)
+    if args.per not in PER:
+        raise SceneError("--per", f"expected one of {', '.join(PER)}, got {shown(args.per)}")
+    _positive_int(args, "max_evaluations", "--max-evaluations", low=1)
+    if len(set(map(str, args.recordings))) != len(args.recordings):
+        raise SceneError("RECORDING", "a recording is given twice: it would count twice in the fit")
+
+
+_CHECKS = {"fold": _fold, "optimise": _optimise, "bench": _bench, "replay": _replay,
+           "calibrate": _calibrate}

@@ -1,0 +1,75 @@
+"""``panel-deploy calibrate RECORDING.mcap ...``: wiring of reading the
+recordings, the fit, the calibrated scene and its plot."""
+
+from __future__ import annotations
+
+import sys
+
+import yaml
+
+from ..build import build_model
+from ..calibrate import calibrate, parameters, read_measured
+from ..calibrate.fit import Iteration
+from ..calibrate.scene_out import calibrated_data
+from ..record.analysis import recorded_scene
+from ..scene import scene_from_dict
+from ..validate import write_atomic
+
+
+def calibrate_command(args) -> int:
+    """Fit ``--fit`` (damping, stiffness, drag; ``--per`` scale or group) to
+    the recordings' joint states and write the calibrated scene to ``--out``
+    (and ``--plot``). The scene is ``--scene`` or the one the first recording
+    ran, ``--set`` applied. Exit 0 when the fit converged, 1 when it did not,
+    130 when interrupted (the best fit so far is still written); 2 for a
+    recording that cannot be fitted, before any simulation."""
+    _, scene = recorded_scene(args.recordings[0], args.scene, args.namespace, args.set or ())
+    model = build_model(scene)
+    fitted = parameters(model, tuple(args.fit.split(",")), args.per)
+    runs = [read_measured(path, scene, model, args.namespace) for path in args.recordings]
+    # A recording that cannot be fitted is refused before the first simulation.
+    result = calibrate(fitted, runs, scene.simulation, noise=scene.collision.noise,
+                       max_evaluations=args.max_evaluations,
+                       progress=None if args.quiet else _progress_line)
+    data = calibrated_data(scene, result)
+    scene_from_dict(data, source=args.out)  # what is written must load as a scene
+    text = (f"# Calibrated by panel-deploy calibrate from {', '.join(map(str, args.recordings))}\n"
+            + yaml.safe_dump(data, sort_keys=False))
+    write_atomic(args.out, lambda f: f.write(text), "--out")
+    if args.plot:
+        from ..calibrate.plot import plot_calibration
+        plot_calibration(result, args.plot)
+    for run in runs:
+        for note in run.notes:
+            print(f"panel-deploy: note: {note}", file=sys.stderr)
+    print("\n".join(summary_lines(result, args.out)))
+    for warning in (result.uncertainty.warnings if result.uncertainty else ()):
+        print(f"panel-deploy: warning: {warning}", file=sys.stderr)
+    if result.status == 3:
+        return 130
+    return 0 if result.success else 1
+
+
+def _progress_line(it: Iteration) -> None:
+    values = "  ".join(f"{name} {value:.5g}" for name, value in it.values.items())
+    offsets = ", ".join(f"{off:.5f}" for off in it.offsets)
+    print(f"calibrate  it {it.iteration:3d}  cost {it.cost:.6g}  {values}  release {offsets} s  "
+          f"simulations {it.simulations}  {it.elapsed:6.1f} s", file=sys.stderr, flush=True)
+
+
+def summary_lines(result, out) -> list:
+    """What the fit found, one line per parameter and recording, for stdout."""
+    u = result.uncertainty
+    lines = [f"{result.message} ({result.iterations} iterations, {result.simulations} "
+             f"simulations, {result.wall_time:.1f} s)"]
+    for i, name in enumerate(result.parameters.names):
+        line = f"  {name}: {result.values[i]:.6g} (nominal {result.parameters.nominal[i]:.6g})"
+        if u is not None:
+            line += (", not identifiable" if name in u.problems
+                     else f", 95 % interval {u.lower[i]:.6g} .. {u.upper[i]:.6g}")
+        lines.append(line)
+    for run, off in zip(result.residuals.runs, result.offsets):
+        lines.append(f"  {run.path}: released {off:.5f} s after its first stamp, "
+                     f"{len(run.t)} joint states of {len(run.hinges)} hinges")
+    lines.append(f"residual RMS {result.residual_rms * 1e3:.3g} mrad -> {out}")
+    return lines

@@ -41,6 +41,8 @@ class Measured:
         Measured angles, rad.
     stamp0 : float
         The first stamp, s, in the recording's own base.
+    topic : str
+        The joint states' topic (namespaced as recorded).
     notes : tuple of str
         What the reader noticed (a truncated file).
     """
@@ -50,6 +52,7 @@ class Measured:
     t: np.ndarray
     theta: np.ndarray
     stamp0: float
+    topic: str = contract.JOINT_STATES.name
     notes: tuple = ()
 
     @property
@@ -77,7 +80,7 @@ def read_measured(path, scene, model, namespace: str | None = None) -> Measured:
         notes = (f"{path} is truncated ({recording.truncated}); read its "
                  f"{len(states.t)} joint states",)
     return Measured(str(path), tuple(states.names), states.t - states.t[0], states.position,
-                    float(states.t[0]), notes)
+                    float(states.t[0]), recording.topic(contract.JOINT_STATES), notes)
 
 
 def motion_threshold(noise: float) -> float:
@@ -103,7 +106,7 @@ def check_measured(run: Measured, noise: float) -> float:
         changes by more than :func:`motion_threshold`), or fewer than
         :data:`MIN_MOVING_SAMPLES` joint states from the first motion on.
     """
-    topic = contract.JOINT_STATES.name
+    topic = run.topic
     threshold = motion_threshold(noise)
     start = first_motion(run.t, run.theta, threshold)
     if start is None:

@@ -36,7 +36,7 @@ def paper_scene(*overrides):
 
 
 def write_encoders(path, truth, *, rate=200.0, gap=(0.09, 0.11), seed=1, stowed_for=RELEASE,
-                   t_end=T_END):
+                   t_end=T_END, epoch=EPOCH):
     """An encoder recording of the paper scene deployed with ``truth``'s model:
     the measured hinges only, stowed until the release, noisy, with a gap."""
     names = [truth.hinges[h].name for h in hinge_order(truth)]
@@ -49,7 +49,7 @@ def write_encoders(path, truth, *, rate=200.0, gap=(0.09, 0.11), seed=1, stowed_
     with Recorder(path) as rec:
         for j, (tj, row) in enumerate(zip(t, theta)):
             rec.write("/joint_states", m.JOINT_STATE,
-                      m.joint_state(carried, EPOCH + tj, row, [], []), round((EPOCH + tj) * 1e9))
+                      m.joint_state(carried, epoch + tj, row, [], []), round((epoch + tj) * 1e9))
     return path
 
 
@@ -64,28 +64,36 @@ def truth(nominal):
                                                                    TRUE["stiffness"]])
 
 
+#: A second test of the same array: another clock, 1 kHz, released later, no gap.
+SECOND = {"rate": 1000.0, "gap": (1.0, 1.0), "seed": 2, "stowed_for": 0.0712, "epoch": 52.5}
+
+
 @pytest.fixture(scope="module")
 def encoders(tmp_path_factory, truth):
-    return write_encoders(tmp_path_factory.mktemp("cal") / "encoders.mcap", truth)
+    folder = tmp_path_factory.mktemp("cal")
+    return (write_encoders(folder / "encoders.mcap", truth),
+            write_encoders(folder / "second.mcap", truth, **SECOND))
 
 
-def test_fit_recovers_the_factors_and_the_release_from_noisy_partial_encoders(encoders, nominal):
+def test_fit_recovers_the_factors_and_the_releases_from_two_noisy_partial_recordings(
+        encoders, nominal):
     scene = paper_scene("collision.noise=0.001")
-    run = read_measured(encoders, scene, nominal)
-    assert set(run.hinges).isdisjoint(UNMEASURED) and run.stamp0 == pytest.approx(EPOCH)
+    runs = [read_measured(path, scene, nominal) for path in encoders]
+    assert set(runs[0].hinges).isdisjoint(UNMEASURED)
+    assert [run.stamp0 for run in runs] == pytest.approx([EPOCH, SECOND["epoch"]])
     lines = []
-    result = calibrate(parameters(nominal, ("damping", "stiffness")), [run], scene.simulation,
+    result = calibrate(parameters(nominal, ("damping", "stiffness")), runs, scene.simulation,
                        noise=scene.collision.noise, progress=lines.append)
     assert result.success and result.status == 0
     fitted = dict(zip(result.parameters.names, result.values))
     for name, value in TRUE.items():
         assert fitted[name] == pytest.approx(value, rel=0.03)
-    assert result.offsets[0] == pytest.approx(RELEASE, abs=1e-3)
+    assert result.offsets == pytest.approx([RELEASE, SECOND["stowed_for"]], abs=1e-3)
     u = result.uncertainty
-    assert not u.problems and u.correlation.shape == (3, 3)
+    assert not u.problems and u.correlation.shape == (4, 4)
     assert np.all(u.lower < u.value) and np.all(u.value < u.upper)
     assert result.residual_rms == pytest.approx(NOISE, rel=0.3)
-    assert set(result.rms[0]) == set(run.hinges)
+    assert set(result.rms[1]) == set(runs[1].hinges)
     assert [it.iteration for it in lines] == list(range(1, len(lines) + 1)) and lines
 
 

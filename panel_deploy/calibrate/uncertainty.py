@@ -92,11 +92,12 @@ def uncertainty(J, r, x, names, log) -> Uncertainty:
     correlation[~np.isfinite(correlation)] = 0.0
     np.fill_diagonal(correlation, 1.0)
     q = float(student_t.ppf(0.975, dof))
-    value = np.where(log, np.exp(x), x)
-    se = np.where(log, value * se_x, se_x)
-    lower = np.where(log, np.exp(x - q * se_x), x - q * se_x)
-    upper = np.where(log, np.exp(x + q * se_x), x + q * se_x)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # An interval of a parameter the data do not determine may overflow: inf is its answer.
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        value = np.where(log, np.exp(x), x)
+        se = np.where(log, value * se_x, se_x)
+        lower = np.where(log, np.exp(x - q * se_x), x - q * se_x)
+        upper = np.where(log, np.exp(x + q * se_x), x + q * se_x)
         relative = np.where(log, se_x, se / np.abs(value))
     problems = _problems(names, norms, sv, Vt, keep, correlation, relative, log, condition)
     return Uncertainty(tuple(names), value, se, relative, lower, upper, correlation, condition,

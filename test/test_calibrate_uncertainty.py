@@ -1,5 +1,5 @@
 """Standard errors, intervals and identifiability of a least-squares optimum,
-on Jacobians whose answer is known; the scene's calibration section."""
+on Jacobians whose answer is known."""
 
 from __future__ import annotations
 
@@ -8,8 +8,6 @@ import pytest
 from scipy.stats import t as student_t
 
 from panel_deploy.calibrate.uncertainty import uncertainty
-from panel_deploy.errors import SceneError
-from panel_deploy.scene import load_scene, resolve_scene, scene_from_dict
 
 
 def linear_fit(J, noise=0.01, seed=0):
@@ -56,9 +54,3 @@ def test_a_parameter_without_effect_and_one_with_a_large_error_are_flagged():
     assert "relative standard error" in u.problems["cd"]
     assert "k" not in u.problems
 
-
-def test_a_scene_takes_a_calibration_section_and_refuses_one_that_is_no_mapping():
-    data = dict(load_scene(resolve_scene("paper_4x4")).data)
-    assert scene_from_dict({**data, "calibration": {"fitted": ["damping"]}}).data["calibration"]
-    with pytest.raises(SceneError, match="calibration: expected a mapping"):
-        scene_from_dict({**data, "calibration": [1, 2]})

@@ -9,7 +9,7 @@ sample. Angles in rad, times in s.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -24,6 +24,8 @@ MOTION_NOISE = 5.0
 #: Joint states after the motion starts that a fit needs at least: fewer
 #: cannot tell a stiffness from a damping from a release time.
 MIN_MOVING_SAMPLES = 10
+#: The per-message arrays of :class:`~panel_deploy.record.reader.JointStates`.
+PER_SAMPLE = ("t", "position", "velocity", "effort", "log_time")
 
 
 @dataclass(frozen=True)
@@ -60,9 +62,12 @@ class Measured:
         return float(self.t[-1])
 
 
-def read_measured(path, scene, model, namespace: str | None = None) -> Measured:
+def read_measured(path, scene, model, namespace: str | None = None,
+                  until: float | None = None) -> Measured:
     """The joint states of the recording at ``path`` on ``model``'s hinges,
-    stamped as ``scene.collision.stamps`` says.
+    stamped as ``scene.collision.stamps`` says; with ``until``, only those
+    up to ``until`` s after the first stamp (a window: the part of a
+    deployment before its first collision, which the model cannot follow).
 
     Raises
     ------
@@ -75,6 +80,10 @@ def read_measured(path, scene, model, namespace: str | None = None) -> Measured:
     recording = open_recording(path, namespace)
     states = joint_states(recording, scene.collision.stamps)
     hinge_track(states, model, path, scene.name or str(scene.source or ""))
+    if until is not None:
+        keep = states.t - states.t[0] <= until
+        states = replace(states, **{key: getattr(states, key)[keep] for key in PER_SAMPLE
+                                    if getattr(states, key) is not None})
     notes = ()
     if recording.truncated:
         notes = (f"{path} is truncated ({recording.truncated}); read its "

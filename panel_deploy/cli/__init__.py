@@ -157,6 +157,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scale: one factor on every hinge's k and c (the c/k becomes "
                         "hinges.damping_ratio); group: one per stiffness group")
     s.add_argument("--plot", metavar="FILE.png", help="measured vs nominal vs fitted angles, residuals")
+    s.add_argument("--until", type=float, metavar="SECONDS",
+                   help="fit only the joint states up to this long after each recording's "
+                        "first stamp (e.g. up to the first collision)")
     s.add_argument("--namespace", help="the array to fit, in recordings of several (e.g. array1)")
     s.add_argument("--max-evaluations", type=int, default=50,
                    help="residual evaluations of the fit at most (each iteration: one, plus "

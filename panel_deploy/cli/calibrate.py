@@ -26,7 +26,8 @@ def calibrate_command(args) -> int:
     _, scene = recorded_scene(args.recordings[0], args.scene, args.namespace, args.set or ())
     model = build_model(scene)
     fitted = parameters(model, tuple(args.fit.split(",")), args.per)
-    runs = [read_measured(path, scene, model, args.namespace) for path in args.recordings]
+    runs = [read_measured(path, scene, model, args.namespace, args.until)
+            for path in args.recordings]
     # A recording that cannot be fitted is refused before the first simulation.
     result = calibrate(fitted, runs, scene.simulation, noise=scene.collision.noise,
                        max_evaluations=args.max_evaluations,

@@ -206,6 +206,8 @@ def _calibrate(args):
     if args.per not in PER:
         raise SceneError("--per", f"expected one of {', '.join(PER)}, got {shown(args.per)}")
     _positive_int(args, "max_evaluations", "--max-evaluations", low=1)
+    if args.until is not None:
+        finite_number(args.until, "--until", low=0, low_open=True)
     if len(set(map(str, args.recordings))) != len(args.recordings):
         raise SceneError("RECORDING", "a recording is given twice: it would count twice in the fit")
 

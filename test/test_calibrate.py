@@ -193,7 +193,7 @@ NAMES = ("r1c1-r1c2", "r1c1-r2c1", "r1c3-r1c4", "r1c4-r2c4", "r2c1-r3c1", "r2c2-
 
 @pytest.mark.parametrize("case", ["motionless", "too short", "fit", "per", "drag without air",
                                   "foreign joints", "out is the recording", "twice",
-                                  "evaluations"])
+                                  "evaluations", "until"])
 def test_refusals_are_one_line_naming_the_field_and_exit_2(case, recorded, tmp_path, capsys):
     out = str(tmp_path / "out.yaml")
     rec = str(recorded)
@@ -210,6 +210,7 @@ def test_refusals_are_one_line_naming_the_field_and_exit_2(case, recorded, tmp_p
         "out is the recording": ([rec, "--out", rec], ["--out", "destroy the input"]),
         "twice": ([rec, rec], ["RECORDING", "twice"]),
         "evaluations": ([rec, "--max-evaluations", "0"], ["--max-evaluations"]),
+        "until": ([rec, "--until", "0"], ["--until", "expected a number > 0"]),
     }[case]
     if "--out" not in args:
         args = [*args, "--out", out]

@@ -154,26 +154,23 @@ def calibrate(parameters: Parameters, runs, simulation, *, noise: float = 0.0,
                                dict(zip(names, map(float, values))), tuple(map(float, offs)),
                                residuals.simulations, time.perf_counter() - start_clock))
 
-    status, message = 0, ""
+    unc = None
     try:
-        fit = least_squares(residuals, x0, jac=lambda x: residuals.jacobian(x),
-                            bounds=(lower, upper), method="trf", x_scale="jac",
-                            ftol=TOLERANCE, xtol=TOLERANCE, gtol=TOLERANCE,
-                            max_nfev=max_evaluations, callback=report)
-        x = fit.x
+        fit = least_squares(residuals, x0, jac=residuals.jacobian, bounds=(lower, upper),
+                            method="trf", x_scale="jac", ftol=TOLERANCE, xtol=TOLERANCE,
+                            gtol=TOLERANCE, max_nfev=max_evaluations, callback=report)
+        x, r = fit.x, fit.fun
         status = 0 if fit.status > 0 else 1
         message = (fit.message if fit.status > 0
                    else f"the budget of {max_evaluations} evaluations ran out before convergence")
+        # least_squares hands back the Jacobian at its result: no more simulations.
+        unc = uncertainty(fit.jac, r, x, (*names, *(f"release[{i}]" for i in range(len(runs)))),
+                          [True] * len(names) + [False] * len(runs))
     except KeyboardInterrupt:
         x = residuals.best[1] if residuals.best[1] is not None else x0
+        r = residuals(x)
         status, message = 3, (f"interrupted after {iterations[0]} iterations: the best point "
                               "so far is the result, without intervals")
-    r = residuals(x)
-    unc = None
-    if status != 3:
-        unc = uncertainty(residuals.jacobian(x), r, x,
-                          (*names, *(f"release[{i}]" for i in range(len(runs)))),
-                          [True] * len(names) + [False] * len(runs))
     if residuals.failures:
         message += (f"; {len(residuals.failures)} of {residuals.simulations} simulations "
                     f"failed (first: {residuals.failures[0]})")

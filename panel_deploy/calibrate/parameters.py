@@ -109,17 +109,16 @@ def parameters(model: Model, fit, per: str = "scale") -> Parameters:
                                         "(--set air.density=1.2)")
     everything = tuple(range(len(model.hinges)))
     groups = (model.hinge_groups or tuple((i,) for i in everything)) if per == "group" else (everything,)
-    names, kinds, members, start, nominal = [], [], [], [], []
+    rows = []  # (name, kind, hinges, start, nominal) of every parameter
     for kind in (k for k in KINDS if k in fit):
         if kind == "drag":
             scene_cd = model.air.drag_coefficient
-            names.append(kind), kinds.append(kind), members.append(everything)
-            start.append(scene_cd if scene_cd > 0 else DRAG_START), nominal.append(scene_cd)
+            rows.append((kind, kind, everything, scene_cd if scene_cd > 0 else DRAG_START, scene_cd))
             continue
-        for group in groups:
-            names.append(kind if per == "scale" else f"{kind}[{model.hinges[group[0]].name}]")
-            kinds.append(kind), members.append(group), start.append(1.0), nominal.append(1.0)
+        rows += [(kind if per == "scale" else f"{kind}[{model.hinges[group[0]].name}]", kind,
+                  group, 1.0, 1.0) for group in groups]
+    names, kinds, members, start, nominal = zip(*rows)
     bounds = np.array([DRAG_BOUNDS if kind == "drag" else SCALE_BOUNDS for kind in kinds])
-    return Parameters(model, tuple(k for k in KINDS if k in fit), per, tuple(names), tuple(kinds),
-                      tuple(members), np.clip(start, bounds[:, 0], bounds[:, 1]),
-                      np.array(nominal), bounds[:, 0], bounds[:, 1])
+    return Parameters(model, tuple(k for k in KINDS if k in fit), per, names, kinds, members,
+                      np.clip(start, bounds[:, 0], bounds[:, 1]), np.array(nominal),
+                      bounds[:, 0], bounds[:, 1])

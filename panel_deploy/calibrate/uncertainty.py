@@ -18,7 +18,7 @@ from scipy.stats import t as student_t
 
 #: Singular values of the column-normalised Jacobian below this fraction of
 #: the largest: a direction of parameter space the data do not see (the
-#: finite differences are good to about 1e-4 of a column).
+#: finite differences are good to about 1e-2 of a column).
 SINGULAR_TOL = 1e-3
 #: |correlation| above this: two parameters the data cannot tell apart.
 MAX_CORRELATION = 0.99

@@ -104,6 +104,14 @@ def first_motion(t, theta, threshold: float) -> float | None:
     return float(t[moved[0]]) if len(moved) else None
 
 
+def still_hinges(runs, threshold: float) -> set:
+    """Names of the measured hinges that stay within ``threshold`` (rad) of
+    their first angle in every recording of ``runs`` that carries them."""
+    moved = {h for run in runs for h, change in zip(run.hinges, np.ptp(run.theta, axis=0))
+             if change > threshold}
+    return {h for run in runs for h in run.hinges} - moved
+
+
 def check_measured(run: Measured, noise: float) -> float:
     """The time (s) at which ``run`` starts to move, after checking that it
     moves and moves long enough to be fitted.

@@ -68,10 +68,11 @@ class Uncertainty:
                 for name, why in self.problems.items()]
 
 
-def uncertainty(J, r, x, names, log) -> Uncertainty:
+def uncertainty(J, r, x, names, log, known=None) -> Uncertainty:
     """The :class:`Uncertainty` of a least-squares optimum ``x`` with
     residuals ``r`` and Jacobian ``J`` (m, p); ``log`` (p,) bool marks the
-    parameters fitted as logarithms."""
+    parameters fitted as logarithms; ``known`` (name -> why) parameters the
+    caller knows the data do not determine, whatever the linearisation says."""
     J, r, x = (np.asarray(a, dtype=float) for a in (J, r, x))
     log = np.asarray(log, dtype=bool)
     m, p = J.shape
@@ -99,7 +100,8 @@ def uncertainty(J, r, x, names, log) -> Uncertainty:
         lower = np.where(log, np.exp(x - q * se_x), x - q * se_x)
         upper = np.where(log, np.exp(x + q * se_x), x + q * se_x)
         relative = np.where(log, se_x, se / np.abs(value))
-    problems = _problems(names, norms, sv, Vt, keep, correlation, relative, log, condition)
+    problems = {**_problems(names, norms, sv, Vt, keep, correlation, relative, log, condition),
+                **(known or {})}
     return Uncertainty(tuple(names), value, se, relative, lower, upper, correlation, condition,
                        problems, dof)
 

@@ -186,6 +186,11 @@ def _stowed(path, t_end, names=("r1c1-r2c1",), moving=False):
     return path
 
 
+def _text(path):
+    path.write_text("hinge angles, by hand\n")
+    return path
+
+
 #: Every hinge of the paper scene: angles that need no loop closure.
 NAMES = ("r1c1-r1c2", "r1c1-r2c1", "r1c3-r1c4", "r1c4-r2c4", "r2c1-r3c1", "r2c2-r3c2",
          "r2c4-r3c4", "r3c1-r4c1", "r3c2-r4c2", "r3c4-r4c4", "r4c1-r4c2", "r4c3-r4c4")
@@ -193,7 +198,7 @@ NAMES = ("r1c1-r1c2", "r1c1-r2c1", "r1c3-r1c4", "r1c4-r2c4", "r2c1-r3c1", "r2c2-
 
 @pytest.mark.parametrize("case", ["motionless", "too short", "fit", "per", "drag without air",
                                   "foreign joints", "out is the recording", "twice",
-                                  "evaluations", "until"])
+                                  "evaluations", "until", "not a recording", "no scene"])
 def test_refusals_are_one_line_naming_the_field_and_exit_2(case, recorded, tmp_path, capsys):
     out = str(tmp_path / "out.yaml")
     rec = str(recorded)
@@ -211,10 +216,14 @@ def test_refusals_are_one_line_naming_the_field_and_exit_2(case, recorded, tmp_p
         "twice": ([rec, rec], ["RECORDING", "twice"]),
         "evaluations": ([rec, "--max-evaluations", "0"], ["--max-evaluations"]),
         "until": ([rec, "--until", "0"], ["--until", "expected a number > 0"]),
+        "not a recording": ([str(_text(tmp_path / "notes.mcap"))], ["notes.mcap"]),
+        "no scene": ([str(_stowed(tmp_path / "bare.mcap", 0.3, NAMES))],
+                     ["bare.mcap", "no /panel_deploy/model", "--scene"]),
     }[case]
     if "--out" not in args:
         args = [*args, "--out", out]
-    code = main(["calibrate", *args, "--scene", "paper_4x4", *(f"--set={s}" for s in SETS)])
+    scene = [] if case == "no scene" else ["--scene", "paper_4x4"]
+    code = main(["calibrate", *args, *scene, *(f"--set={s}" for s in SETS)])
     assert code == 2
     _one_line_error(capsys, *parts)
     assert not (tmp_path / "out.yaml").exists()

@@ -5,6 +5,8 @@ scene re-loaded by simulate, Ctrl-C, and every refusal."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import yaml
@@ -134,6 +136,7 @@ def test_calibrate_writes_the_scene_keys_and_a_calibration_section(calibrated):
     assert run["release_offset"] == pytest.approx(0.0, abs=1e-4)
     assert set(run["residual_rms"]) == set(run["hinges"])
     assert section["correlation"]["names"] == ["damping", "stiffness", "release[0]"]
+    assert section["first_collision"] == {"fitted": None, "measured": [None]}
 
 
 def test_the_calibrated_scene_rebuilds_the_fitted_model_and_simulate_runs_it(calibrated, capsys):
@@ -168,6 +171,22 @@ def test_interrupted_fit_keeps_the_best_point_and_writes_the_outputs(recorded, t
     assert "interval_95" not in section["parameters"]["damping"]
     err = capsys.readouterr().err
     assert err.count("calibrate  it") == 1  # one progress line per finished iteration
+
+
+def test_the_fitted_first_collision_is_set_beside_the_recorded_one(tmp_path, capsys):
+    """The sample bag collides at 0.416 s (L2 into L1); two evaluations from the
+    recording's own scene are enough to see both, whether or not the fit converged."""
+    bag = Path(__file__).resolve().parent.parent / "bags" / "paper_4x4_uniform.mcap"
+    out = tmp_path / "calibrated.yaml"
+    code = main(["calibrate", str(bag), "--until", "0.45", "--max-evaluations", "2", "--quiet",
+                 "--out", str(out)])
+    assert code in (0, 1)
+    collisions = yaml.safe_load(out.read_text())["calibration"]["first_collision"]
+    [measured] = collisions["measured"]
+    for event in (collisions["fitted"], measured):
+        assert event["pair"] == ["r1c2+r1c3", "r2c2+r2c3"]
+        assert event["t"] == pytest.approx(0.416, abs=2e-3)
+    assert "first collision r1c2+r1c3 - r2c2+r2c3 at 0.41" in capsys.readouterr().out
 
 
 def _one_line_error(capsys, *parts):

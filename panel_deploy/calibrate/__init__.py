@@ -8,6 +8,7 @@ the panel faces fitted to recorded joint states, with their uncertainty.
 - :mod:`.residuals`: weighted residuals and their Jacobian;
 - :mod:`.fit`: the least-squares fit (:func:`calibrate`);
 - :mod:`.uncertainty`: standard errors, intervals, what is not identifiable;
+- :mod:`.collisions`: the fitted model's first collision against the recorded ones;
 - :mod:`.scene_out`: the calibrated scene and its ``calibration`` section;
 - :mod:`.plot`: measured vs nominal vs fitted angles, and the residuals.
 """

@@ -81,7 +81,7 @@ def read_measured(path, scene, model, namespace: str | None = None,
     states = joint_states(recording, scene.collision.stamps)
     hinge_track(states, model, path, scene.name or str(scene.source or ""))
     if until is not None:
-        keep = states.t - states.t[0] <= until
+        keep = states.t - states.t[0] <= until + 1e-9  # stamps count whole nanoseconds
         states = replace(states, **{key: getattr(states, key)[keep] for key in PER_SAMPLE
                                     if getattr(states, key) is not None})
     notes = ()

@@ -73,8 +73,8 @@ class CalibrationResult:
         None when no Jacobian at the result exists (interrupted before one).
     rms : list of dict
         RMS residual per hinge of every recording, rad.
-    model, nominal : Model
-        The fitted model and the scene's.
+    model : Model
+        The fitted model (``parameters.model`` is the scene's).
     residuals : Residuals
         The evaluator, for plots of any point.
     iterations, simulations : int
@@ -94,7 +94,6 @@ class CalibrationResult:
     uncertainty: Uncertainty | None
     rms: list
     model: Model
-    nominal: Model
     residuals: Residuals
     iterations: int
     simulations: int
@@ -182,7 +181,7 @@ def calibrate(parameters: Parameters, runs, simulation, *, noise: float = 0.0,
         success=status == 0, status=status, message=message, parameters=parameters,
         values=values, offsets=offs, x=np.asarray(x), cost=0.5 * float(r @ r), noise=noise,
         uncertainty=unc, rms=residuals.per_hinge_rms(x), model=parameters.model_at(values),
-        nominal=parameters.model, residuals=residuals, iterations=iterations[0],
+        residuals=residuals, iterations=iterations[0],
         simulations=residuals.simulations, wall_time=time.perf_counter() - start_clock)
 
 

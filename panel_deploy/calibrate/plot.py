@@ -15,9 +15,12 @@ from .fit import CalibrationResult
 COLUMNS = 4
 
 
-def plot_calibration(result: CalibrationResult, path, flag: str = "--plot") -> None:
+def plot_calibration(result: CalibrationResult, path, flag: str = "--plot",
+                     collisions: dict | None = None) -> None:
     """Draw ``result`` to ``path`` (PNG, or the suffix's format); two
-    simulations (nominal and fitted) over the recordings' span."""
+    simulations (nominal and fitted) over the recordings' span. With
+    ``collisions`` (:func:`~.collisions.first_collisions`) every panel marks
+    the fitted first collision and each recording's."""
     import matplotlib
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
@@ -45,6 +48,9 @@ def plot_calibration(result: CalibrationResult, path, flag: str = "--plot") -> N
             residual_axes.plot(run.t - off, error * 1e3, ".", ms=1.5)
         ax.plot(tau, theta_nominal[:, i], "--", color="0.4", lw=1, label="nominal")
         ax.plot(tau, theta_fitted[:, i], "-", color="k", lw=1, label="fitted")
+        for j, event in enumerate(_marks(collisions)):
+            ax.axvline(event["t"], color="k" if j == 0 else "C3", ls=":", lw=1,
+                       label=("fitted" if j == 0 else "measured") + " 1st collision")
         ax.set_title(hinge, fontsize=9)
         ax.set_ylabel("theta, rad", fontsize=8)
         ax.tick_params(labelsize=7)
@@ -59,3 +65,10 @@ def plot_calibration(result: CalibrationResult, path, flag: str = "--plot") -> N
     values = ", ".join(f"{n} {v:.4g}" for n, v in zip(result.parameters.names, result.values))
     fig.suptitle(f"calibration: {values}", fontsize=10)
     save_figure(fig, path, flag)
+
+
+def _marks(collisions) -> list:
+    """The first collisions to mark: the fitted one first, then the recordings'."""
+    if collisions is None:
+        return []
+    return [e for e in (collisions["fitted"], *collisions["measured"]) if e is not None]

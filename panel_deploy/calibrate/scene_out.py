@@ -28,9 +28,10 @@ def _close(a: float, b: float) -> bool:
     return math.isclose(a, b, rel_tol=1e-12, abs_tol=0.0)
 
 
-def calibrated_data(scene, result: CalibrationResult) -> dict:
+def calibrated_data(scene, result: CalibrationResult, collisions: dict | None = None) -> dict:
     """The scene mapping of ``scene`` with ``result``'s values applied and
-    its ``calibration`` section (:func:`calibration_section`)."""
+    its ``calibration`` section (:func:`calibration_section`), with the
+    first collisions (:func:`~.collisions.first_collisions`) when given."""
     data = copy.deepcopy(scene.data)
     p = result.parameters
     value = dict(zip(p.names, map(float, result.values)))
@@ -54,6 +55,8 @@ def calibrated_data(scene, result: CalibrationResult) -> dict:
     if "drag" in p.fit:
         data["air"] = {**(data.get("air") or {}), "drag_coefficient": value["drag"]}
     data["calibration"] = calibration_section(result)
+    if collisions is not None:
+        data["calibration"]["first_collision"] = collisions
     return data
 
 

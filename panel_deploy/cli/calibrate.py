@@ -9,6 +9,7 @@ import yaml
 
 from ..build import build_model
 from ..calibrate import calibrate, parameters, read_measured
+from ..calibrate.collisions import first_collisions
 from ..calibrate.fit import Iteration
 from ..calibrate.scene_out import calibrated_data
 from ..record.analysis import recorded_scene
@@ -32,23 +33,30 @@ def calibrate_command(args) -> int:
     result = calibrate(fitted, runs, scene.simulation, noise=scene.collision.noise,
                        max_evaluations=args.max_evaluations,
                        progress=None if args.quiet else _progress_line)
-    data = calibrated_data(scene, result)
+    collisions = first_collisions(result, scene)
+    data = calibrated_data(scene, result, collisions)
     scene_from_dict(data, source=args.out)  # what is written must load as a scene
     text = (f"# Calibrated by panel-deploy calibrate from {', '.join(map(str, args.recordings))}\n"
             + yaml.safe_dump(data, sort_keys=False))
     write_atomic(args.out, lambda f: f.write(text), "--out")
     if args.plot:
         from ..calibrate.plot import plot_calibration
-        plot_calibration(result, args.plot)
+        plot_calibration(result, args.plot, collisions=collisions)
     for run in runs:
         for note in run.notes:
             print(f"panel-deploy: note: {note}", file=sys.stderr)
-    print("\n".join(summary_lines(result, args.out)))
+    print("\n".join(summary_lines(result, args.out, collisions)))
     for warning in (result.uncertainty.warnings if result.uncertainty else ()):
         print(f"panel-deploy: warning: {warning}", file=sys.stderr)
     if result.status == 3:
         return 130
     return 0 if result.success else 1
+
+
+def _collision(event) -> str:
+    if event is None:
+        return "none"
+    return f"{event['pair'][0]} - {event['pair'][1]} at {event['t']:.4f} s after release"
 
 
 def _progress_line(it: Iteration) -> None:
@@ -58,8 +66,9 @@ def _progress_line(it: Iteration) -> None:
           f"simulations {it.simulations}  {it.elapsed:6.1f} s", file=sys.stderr, flush=True)
 
 
-def summary_lines(result, out) -> list:
-    """What the fit found, one line per parameter and recording, for stdout."""
+def summary_lines(result, out, collisions) -> list:
+    """What the fit found, one line per parameter and recording, and the first
+    collisions, for stdout."""
     u = result.uncertainty
     lines = [f"{result.message} ({result.iterations} iterations, {result.simulations} "
              f"simulations, {result.wall_time:.1f} s)"]
@@ -69,8 +78,10 @@ def summary_lines(result, out) -> list:
             line += (", not identifiable" if name in u.problems
                      else f", 95 % interval {u.lower[i]:.6g} .. {u.upper[i]:.6g}")
         lines.append(line)
-    for run, off in zip(result.residuals.runs, result.offsets):
+    for run, off, event in zip(result.residuals.runs, result.offsets, collisions["measured"]):
         lines.append(f"  {run.path}: released {off:.5f} s after its first stamp, "
-                     f"{len(run.t)} joint states of {len(run.hinges)} hinges")
+                     f"{len(run.t)} joint states of {len(run.hinges)} hinges, "
+                     f"first collision {_collision(event)}")
+    lines.append(f"  fitted model: first collision {_collision(collisions['fitted'])}")
     lines.append(f"residual RMS {result.residual_rms * 1e3:.3g} mrad -> {out}")
     return lines

@@ -82,3 +82,23 @@ def test_drag_in_air_too_thin_to_act_is_reported_not_identifiable():
     assert any(w.startswith("drag is not identifiable") for w in u.warnings)
     entry = calibrated_data(thin, result)["calibration"]["parameters"]["drag"]
     assert entry["identifiable"] is False and "interval_95" not in entry
+
+
+def test_a_group_whose_hinges_rest_on_their_stops_is_held_at_the_scenes_values():
+    """In the first 0.12 s the top horizontal hinges stay folded: their
+    stiffness is not fitted but held, and said so; the other group is fitted."""
+    top = ["r1c1-r1c2", "r1c3-r1c4"]
+    rest = [h for h in OUTER + INNER if h not in top]
+    groups = f"hinges.groups=[{top}, {rest}]".replace("'", "")
+    nominal_scene = scene(groups)
+    model = build_model(nominal_scene)
+    truth = parameters(model, ("stiffness",), "group").model_at([1.0, 1.1])
+    result = calibrate(parameters(model, ("stiffness",), "group"),
+                       [measured(truth, nominal_scene.simulation)], nominal_scene.simulation)
+    assert list(result.held) == ["stiffness[r1c1-r1c2]"]
+    assert "held at the scene's value" in result.held["stiffness[r1c1-r1c2]"]
+    assert result.values == pytest.approx([1.0, 1.1], rel=1e-3)
+    assert result.uncertainty.names == ("stiffness[r1c1-r2c1]", "release[0]")
+    entry = calibrated_data(nominal_scene, result)["calibration"]["parameters"]
+    assert entry["stiffness[r1c1-r1c2]"]["held"] and not entry["stiffness[r1c1-r1c2]"]["identifiable"]
+    assert entry["stiffness[r1c1-r2c1]"]["identifiable"]

@@ -16,7 +16,7 @@ from ..model import Model
 from .data import check_measured, motion_threshold, still_hinges
 from .parameters import Parameters
 from .residuals import Residuals, start_offsets
-from .uncertainty import Uncertainty, uncertainty
+from .uncertainty import Uncertainty, uncertainty, warning
 
 #: Noise assumed for the weights when the scene states none
 #: (``collision.noise`` 0), rad: a good encoder's. The standard errors do not
@@ -59,8 +59,13 @@ class CalibrationResult:
         best point so far is the result), -1 the fit could not start.
     message : str
     parameters : Parameters
+        Every parameter asked for.
     values : (p,) ndarray
-        Fitted factors and C_d.
+        Fitted factors and C_d (the held ones at the scene's values).
+    held : dict
+        Parameter name -> why the data cannot determine it, for factors not
+        fitted but held at the scene's values: those whose measured hinges
+        never leave their first angle.
     offsets : (R,) ndarray
         Release time of every recording, s after its first stamp.
     x : ndarray
@@ -87,6 +92,7 @@ class CalibrationResult:
     message: str
     parameters: Parameters
     values: np.ndarray
+    held: dict
     offsets: np.ndarray
     x: np.ndarray
     cost: float
@@ -103,6 +109,16 @@ class CalibrationResult:
     def samples(self) -> int:
         """Joint states fitted, over all recordings."""
         return sum(len(run.t) for run in self.residuals.runs)
+
+    @property
+    def problems(self) -> dict:
+        """Parameter name -> why the data do not determine it (held or not)."""
+        return {**(self.uncertainty.problems if self.uncertainty else {}), **self.held}
+
+    @property
+    def warnings(self) -> list:
+        """One sentence per parameter the data do not determine."""
+        return [warning(name, why) for name, why in self.problems.items()]
 
     @property
     def residual_rms(self) -> float:
@@ -138,14 +154,16 @@ def calibrate(parameters: Parameters, runs, simulation, *, noise: float = 0.0,
     start_clock = time.perf_counter()
     noise = noise if noise > 0 else DEFAULT_NOISE
     starts = [check_measured(run, noise) for run in runs]
-    residuals = Residuals(parameters, runs, simulation, noise)
-    nominal = residuals.trajectory(parameters.nominal, [0.0] * len(runs))
+    held = _unmoved(parameters, runs, motion_threshold(noise))
+    free = parameters.without(held)
+    residuals = Residuals(free, runs, simulation, noise)
+    nominal = residuals.trajectory(free.nominal, [0.0] * len(runs))
     offsets = start_offsets(starts, nominal, motion_threshold(noise))
-    x0 = np.concatenate([np.log(parameters.start), offsets])
-    lower = np.concatenate([np.log(parameters.lower), offsets - OFFSET_REACH])
-    upper = np.concatenate([np.log(parameters.upper), offsets + OFFSET_REACH])
+    x0 = np.concatenate([np.log(free.start), offsets])
+    lower = np.concatenate([np.log(free.lower), offsets - OFFSET_REACH])
+    upper = np.concatenate([np.log(free.upper), offsets + OFFSET_REACH])
     iterations = [0]
-    names = parameters.names
+    names = free.names
 
     def report(intermediate_result):  # the name asks scipy for cost and x
         iterations[0] += 1
@@ -166,8 +184,7 @@ def calibrate(parameters: Parameters, runs, simulation, *, noise: float = 0.0,
                    else f"the budget of {max_evaluations} evaluations ran out before convergence")
         # least_squares hands back the Jacobian at its result: no more simulations.
         unc = uncertainty(fit.jac, r, x, (*names, *(f"release[{i}]" for i in range(len(runs)))),
-                          [True] * len(names) + [False] * len(runs),
-                          known=_unmoved(parameters, runs, motion_threshold(noise)))
+                          [True] * len(names) + [False] * len(runs))
     except KeyboardInterrupt:
         x = residuals.best[1] if residuals.best[1] is not None else x0
         r = residuals(x)
@@ -176,11 +193,13 @@ def calibrate(parameters: Parameters, runs, simulation, *, noise: float = 0.0,
     if residuals.failures:
         message += (f"; {len(residuals.failures)} of {residuals.simulations} simulations "
                     f"failed (first: {residuals.failures[0]})")
-    values, offs = residuals.split(x)
+    fitted, offs = residuals.split(x)
+    values = np.array([fitted[names.index(n)] if n in names else start
+                       for n, start in zip(parameters.names, parameters.start)])
     return CalibrationResult(
         success=status == 0, status=status, message=message, parameters=parameters,
-        values=values, offsets=offs, x=np.asarray(x), cost=0.5 * float(r @ r), noise=noise,
-        uncertainty=unc, rms=residuals.per_hinge_rms(x), model=parameters.model_at(values),
+        values=values, held=held, offsets=offs, x=np.asarray(x), cost=0.5 * float(r @ r),
+        noise=noise, uncertainty=unc, rms=residuals.per_hinge_rms(x), model=free.model_at(fitted),
         residuals=residuals, iterations=iterations[0],
         simulations=residuals.simulations, wall_time=time.perf_counter() - start_clock)
 
@@ -188,7 +207,9 @@ def calibrate(parameters: Parameters, runs, simulation, *, noise: float = 0.0,
 def _unmoved(parameters: Parameters, runs, threshold: float) -> dict:
     """Parameter name -> why, for each k or c factor whose measured hinges all
     stay put (within ``threshold``, rad) in every recording: hinges resting on
-    a stop, whose spring and damper barely act on the data."""
+    a stop, whose spring and damper barely act on the data. Fitted, such a
+    factor wanders far along a flat valley of the cost (the paper scene's top
+    hinges: k 3.4x for a true 1.55x, c anywhere in 0.02-50x) and slows the fit."""
     still = still_hinges(runs, threshold)
     measured = {h for run in runs for h in run.hinges}
     out = {}
@@ -197,5 +218,5 @@ def _unmoved(parameters: Parameters, runs, threshold: float) -> dict:
         seen = [h for h in hinges if h in measured]
         if kind != "drag" and seen and set(seen) <= still:
             out[name] = (f"its measured hinges ({', '.join(seen)}) stay within {threshold:g} rad "
-                         "of their first angle in every recording")
+                         "of their first angle in every recording; held at the scene's value")
     return out

@@ -67,6 +67,18 @@ class Parameters:
     lower: np.ndarray
     upper: np.ndarray
 
+    def without(self, names) -> Parameters:
+        """These parameters less those named in ``names``, which then stay at
+        the scene's values (factor 1)."""
+        keep = [i for i, name in enumerate(self.names) if name not in names]
+
+        def pick(seq):
+            return tuple(seq[i] for i in keep)
+
+        return replace(self, names=pick(self.names), kinds=pick(self.kinds),
+                       groups=pick(self.groups), start=self.start[keep],
+                       nominal=self.nominal[keep], lower=self.lower[keep], upper=self.upper[keep])
+
     def model_at(self, values) -> Model:
         """The model with parameter ``values`` (factors, C_d) applied."""
         values = np.asarray(values, dtype=float)

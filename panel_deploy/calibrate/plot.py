@@ -26,8 +26,8 @@ def plot_calibration(result: CalibrationResult, path, flag: str = "--plot",
     from matplotlib.figure import Figure
 
     res = result.residuals
-    nominal = res.trajectory(result.parameters.nominal, result.offsets)
-    fitted = res.trajectory(result.values, result.offsets)
+    nominal = res.trajectory(res.parameters.nominal, result.offsets)
+    fitted = res.trajectory(*res.split(result.x))
     hinges = res.hinges
     rows = math.ceil((len(hinges) + 1) / COLUMNS)
     fig = Figure(figsize=(3.2 * COLUMNS, 2.4 * rows), layout="constrained")

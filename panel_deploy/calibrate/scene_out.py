@@ -75,20 +75,21 @@ def calibration_section(result: CalibrationResult) -> dict:
                  "unit": UNITS[kind]}
         if p.per == "group" and kind != "drag":
             entry["hinges"] = [model.hinges[h].name for h in group]
-        if u is not None and name in u.problems:
-            entry.update(identifiable=False, why=u.problems[name])
+        if name in result.problems:
+            entry.update(identifiable=False, why=result.problems[name], held=name in result.held)
         elif u is not None:
-            entry.update(identifiable=True, standard_error=_number(u.se[i]),
-                         interval_95=[_number(u.lower[i]), _number(u.upper[i])])
+            se, lower, upper = u.of(name)
+            entry.update(identifiable=True, standard_error=_number(se),
+                         interval_95=[_number(lower), _number(upper)])
         parameters[name] = entry
     recordings = []
     for j, (run, rms) in enumerate(zip(res.runs, result.rms)):
         entry = {"file": run.path, "hinges": list(run.hinges), "samples": int(len(run.t)),
                  "duration": _number(run.duration), "first_stamp": float(run.stamp0),
                  "release_offset": _number(result.offsets[j])}
-        k = len(p.names) + j
-        if u is not None and u.names[k] not in u.problems:
-            entry["release_offset_interval_95"] = [_number(u.lower[k]), _number(u.upper[k])]
+        if u is not None and f"release[{j}]" not in u.problems:
+            _, lower, upper = u.of(f"release[{j}]")
+            entry["release_offset_interval_95"] = [_number(lower), _number(upper)]
         entry["residual_rms"] = {h: _number(v) for h, v in rms.items()}
         recordings.append(entry)
     section = {
@@ -108,5 +109,5 @@ def calibration_section(result: CalibrationResult) -> dict:
         section["correlation"] = {"names": list(u.names),
                                   "matrix": [[_number(c) for c in row] for row in u.correlation]}
         section["condition_number"] = _number(u.condition)
-        section["warnings"] = u.warnings
+    section["warnings"] = result.warnings
     return section

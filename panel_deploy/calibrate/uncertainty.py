@@ -64,15 +64,23 @@ class Uncertainty:
     @property
     def warnings(self) -> list:
         """One sentence per parameter the data do not determine."""
-        return [f"{name} is not identifiable from these data: {why}"
-                for name, why in self.problems.items()]
+        return [warning(name, why) for name, why in self.problems.items()]
+
+    def of(self, name: str) -> tuple:
+        """``(standard error, lower, upper)`` of the parameter ``name``, own units."""
+        i = self.names.index(name)
+        return self.se[i], self.lower[i], self.upper[i]
 
 
-def uncertainty(J, r, x, names, log, known=None) -> Uncertainty:
+def warning(name: str, why: str) -> str:
+    """The sentence that says the data do not determine parameter ``name``, and why."""
+    return f"{name} is not identifiable from these data: {why}"
+
+
+def uncertainty(J, r, x, names, log) -> Uncertainty:
     """The :class:`Uncertainty` of a least-squares optimum ``x`` with
     residuals ``r`` and Jacobian ``J`` (m, p); ``log`` (p,) bool marks the
-    parameters fitted as logarithms; ``known`` (name -> why) parameters the
-    caller knows the data do not determine, whatever the linearisation says."""
+    parameters fitted as logarithms."""
     J, r, x = (np.asarray(a, dtype=float) for a in (J, r, x))
     log = np.asarray(log, dtype=bool)
     m, p = J.shape
@@ -100,8 +108,7 @@ def uncertainty(J, r, x, names, log, known=None) -> Uncertainty:
         lower = np.where(log, np.exp(x - q * se_x), x - q * se_x)
         upper = np.where(log, np.exp(x + q * se_x), x + q * se_x)
         relative = np.where(log, se_x, se / np.abs(value))
-    problems = {**_problems(names, norms, sv, Vt, keep, correlation, relative, log, condition),
-                **(known or {})}
+    problems = _problems(names, norms, sv, Vt, keep, correlation, relative, log, condition)
     return Uncertainty(tuple(names), value, se, relative, lower, upper, correlation, condition,
                        problems, dof)
 

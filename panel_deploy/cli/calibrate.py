@@ -46,7 +46,7 @@ def calibrate_command(args) -> int:
         for note in run.notes:
             print(f"panel-deploy: note: {note}", file=sys.stderr)
     print("\n".join(summary_lines(result, args.out, collisions)))
-    for warning in (result.uncertainty.warnings if result.uncertainty else ()):
+    for warning in result.warnings:
         print(f"panel-deploy: warning: {warning}", file=sys.stderr)
     if result.status == 3:
         return 130
@@ -74,9 +74,11 @@ def summary_lines(result, out, collisions) -> list:
              f"simulations, {result.wall_time:.1f} s)"]
     for i, name in enumerate(result.parameters.names):
         line = f"  {name}: {result.values[i]:.6g} (nominal {result.parameters.nominal[i]:.6g})"
-        if u is not None:
-            line += (", not identifiable" if name in u.problems
-                     else f", 95 % interval {u.lower[i]:.6g} .. {u.upper[i]:.6g}")
+        if name in result.problems:
+            line += ", not identifiable" + (" (held)" if name in result.held else "")
+        elif u is not None:
+            _, lower, upper = u.of(name)
+            line += f", 95 % interval {lower:.6g} .. {upper:.6g}"
         lines.append(line)
     for run, off, event in zip(result.residuals.runs, result.offsets, collisions["measured"]):
         lines.append(f"  {run.path}: released {off:.5f} s after its first stamp, "

@@ -457,8 +457,9 @@ SECTIONS = {
 }
 TOP_LEVEL = {"gravity": (vector3, "m/s^2", "gravity in the flat array frame (y towards row 1)"),
              "name": (None, "", "scene name"), "description": (None, "", "free text"),
-             "calibration": (None, "", "what panel-deploy calibrate fitted and from which "
-                                       "recordings (informational: no run reads it)")}
+             # where the scene's values came from (a calibration's figures): read by
+             # people, never by a computation, so any mapping is accepted as it is
+             "calibration": (None, "", "informational: how values were calibrated (any mapping)")}
 
 
 def _parse_section(cls, data, path):
@@ -540,8 +541,7 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
         if key in data and not isinstance(data[key], str):
             raise SceneError(key, f"expected a string, got {_type_name(data[key])}")
     if "calibration" in data and not isinstance(data["calibration"], dict):
-        raise SceneError("calibration", f"expected a mapping (as panel-deploy calibrate writes "
-                                        f"it), got {_type_name(data['calibration'])}")
+        raise SceneError("calibration", f"expected a mapping, got {_type_name(data['calibration'])}")
     return Scene(**sections, gravity=gravity, name=data.get("name", ""),
                  description=data.get("description", ""), source=source, data=data)
 

@@ -142,6 +142,22 @@ def build_parser() -> argparse.ArgumentParser:
     add_set(s)
     s.set_defaults(func=_command("optimise", "optimise_command"))
 
+    s = sub.add_parser("replay", help="replay a recording in rerun, or render it as a PNG strip")
+    s.add_argument("recording", help="MCAP recording (simulate --record, run --record, ros2 bag record)")
+    view = s.add_mutually_exclusive_group()
+    view.add_argument("--save", metavar="OUT.rrd", help="write a rerun recording file")
+    view.add_argument("--spawn", action="store_true", help="open the rerun viewer")
+    view.add_argument("--serve", action="store_true",
+                      help="serve to rerun viewers on 127.0.0.1 (rerun rerun+http://127.0.0.1:PORT/proxy)")
+    s.add_argument("--port", type=int, default=9876, help="port of --serve")
+    s.add_argument("--png", metavar="STRIP.png", help="render frames at --at into one image")
+    s.add_argument("--at", default="0,0.1,0.2,0.3,0.4", metavar="T,T,...",
+                   help="instants of the --png frames, s")
+    s.add_argument("--scene", help="the recording's scene (file or shipped name); default: "
+                                   "the one it ran")
+    s.add_argument("--namespace", help="the array to show, in a recording of several (e.g. array1)")
+    s.set_defaults(func=_command("replay", "replay_command"))
+
     s = sub.add_parser("calibrate", help="fit hinge damping, stiffness and air drag to recorded "
                                          "deployments; write the calibrated scene")
     s.add_argument("recordings", nargs="+", metavar="RECORDING",
@@ -167,22 +183,6 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quiet", action="store_true", help="no progress lines")
     add_set(s)
     s.set_defaults(func=_command("calibrate", "calibrate_command"))
-
-    s = sub.add_parser("replay", help="replay a recording in rerun, or render it as a PNG strip")
-    s.add_argument("recording", help="MCAP recording (simulate --record, run --record, ros2 bag record)")
-    view = s.add_mutually_exclusive_group()
-    view.add_argument("--save", metavar="OUT.rrd", help="write a rerun recording file")
-    view.add_argument("--spawn", action="store_true", help="open the rerun viewer")
-    view.add_argument("--serve", action="store_true",
-                      help="serve to rerun viewers on 127.0.0.1 (rerun rerun+http://127.0.0.1:PORT/proxy)")
-    s.add_argument("--port", type=int, default=9876, help="port of --serve")
-    s.add_argument("--png", metavar="STRIP.png", help="render frames at --at into one image")
-    s.add_argument("--at", default="0,0.1,0.2,0.3,0.4", metavar="T,T,...",
-                   help="instants of the --png frames, s")
-    s.add_argument("--scene", help="the recording's scene (file or shipped name); default: "
-                                   "the one it ran")
-    s.add_argument("--namespace", help="the array to show, in a recording of several (e.g. array1)")
-    s.set_defaults(func=_command("replay", "replay_command"))
 
     s = sub.add_parser("export", help="export the model (MuJoCo MJCF)")
     s.add_argument("scene")

@@ -127,7 +127,7 @@ def test_calibrate_writes_the_scene_keys_and_a_calibration_section(calibrated):
     assert data["hinges"]["stiffness"] == pytest.approx(0.1 * TRUE["stiffness"], rel=1e-3)
     assert data["hinges"]["damping_ratio"] == pytest.approx(
         0.043 * TRUE["damping"] / TRUE["stiffness"], rel=1e-3)
-    section = data["calibration"]
+    section = data["calibration"]["deployment"]
     assert section["parameters"]["damping"]["value"] == pytest.approx(TRUE["damping"], rel=1e-3)
     lo, hi = section["parameters"]["stiffness"]["interval_95"]
     assert lo <= section["parameters"]["stiffness"]["value"] <= hi
@@ -142,7 +142,7 @@ def test_calibrate_writes_the_scene_keys_and_a_calibration_section(calibrated):
 def test_the_calibrated_scene_rebuilds_the_fitted_model_and_simulate_runs_it(calibrated, capsys):
     _, out, _ = calibrated
     scene = load_scene(out)
-    assert scene.data["calibration"]["success"] is True
+    assert scene.data["calibration"]["deployment"]["success"] is True
     model = build_model(scene)
     assert [h.k for h in model.hinges] == pytest.approx([0.1 * TRUE["stiffness"]] * 12, rel=1e-3)
     assert [h.c for h in model.hinges] == pytest.approx([0.0043 * TRUE["damping"]] * 12, rel=1e-3)
@@ -166,7 +166,7 @@ def test_interrupted_fit_keeps_the_best_point_and_writes_the_outputs(recorded, t
     code = main(["calibrate", str(recorded), "--scene", "paper_4x4", "--out", str(out),
                  *(f"--set={s}" for s in SETS)])
     assert code == 130
-    section = yaml.safe_load(out.read_text())["calibration"]
+    section = yaml.safe_load(out.read_text())["calibration"]["deployment"]
     assert section["status"] == 3 and "interrupted" in section["message"]
     assert "interval_95" not in section["parameters"]["damping"]
     err = capsys.readouterr().err
@@ -181,7 +181,7 @@ def test_the_fitted_first_collision_is_set_beside_the_recorded_one(tmp_path, cap
     code = main(["calibrate", str(bag), "--until", "0.45", "--max-evaluations", "2", "--quiet",
                  "--out", str(out)])
     assert code in (0, 1)
-    collisions = yaml.safe_load(out.read_text())["calibration"]["first_collision"]
+    collisions = yaml.safe_load(out.read_text())["calibration"]["deployment"]["first_collision"]
     [measured] = collisions["measured"]
     for event in (collisions["fitted"], measured):
         assert event["pair"] == ["r1c2+r1c3", "r2c2+r2c3"]

@@ -54,7 +54,7 @@ def test_stiffness_per_group_is_recovered_and_written_as_overrides_that_rebuild_
                                                            rel=1e-12)
     assert [h.c for h in rebuilt.hinges] == pytest.approx([h.c for h in result.model.hinges],
                                                            rel=1e-12)
-    section = data["calibration"]["parameters"]["stiffness[r2c2-r3c2]"]
+    section = data["calibration"]["deployment"]["parameters"]["stiffness[r2c2-r3c2]"]
     assert sorted(section["hinges"]) == sorted(INNER) and section["identifiable"]
 
 
@@ -80,7 +80,7 @@ def test_drag_in_air_too_thin_to_act_is_reported_not_identifiable():
     u = result.uncertainty
     assert "drag" in u.problems and "damping" not in u.problems
     assert any(w.startswith("drag is not identifiable") for w in u.warnings)
-    entry = calibrated_data(thin, result)["calibration"]["parameters"]["drag"]
+    entry = calibrated_data(thin, result)["calibration"]["deployment"]["parameters"]["drag"]
     assert entry["identifiable"] is False and "interval_95" not in entry
 
 
@@ -99,6 +99,17 @@ def test_a_group_whose_hinges_rest_on_their_stops_is_held_at_the_scenes_values()
     assert "held at the scene's value" in result.held["stiffness[r1c1-r1c2]"]
     assert result.values == pytest.approx([1.0, 1.1], rel=1e-3)
     assert result.uncertainty.names == ("stiffness[r1c1-r2c1]", "release[0]")
-    entry = calibrated_data(nominal_scene, result)["calibration"]["parameters"]
+    entry = calibrated_data(nominal_scene, result)["calibration"]["deployment"]["parameters"]
     assert entry["stiffness[r1c1-r1c2]"]["held"] and not entry["stiffness[r1c1-r1c2]"]["identifiable"]
     assert entry["stiffness[r1c1-r2c1]"]["identifiable"]
+
+
+def test_the_deployment_entry_keeps_what_other_calibrations_wrote():
+    base = scene("air.density=1.2")
+    earlier = scene_from_dict({**base.data, "calibration": {"free_vibration": {"c": 0.0043}}})
+    model = build_model(earlier)
+    result = calibrate(parameters(model, ("damping",)), [measured(model, earlier.simulation, 5)],
+                       earlier.simulation, noise=1e-3)
+    written = calibrated_data(earlier, result)["calibration"]
+    assert written["free_vibration"] == {"c": 0.0043}
+    assert written["deployment"]["parameters"]["damping"]["value"] == pytest.approx(1.0, rel=0.01)

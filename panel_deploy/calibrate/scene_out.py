@@ -1,7 +1,8 @@
 """The calibrated scene: the input scene with the fitted values written as the
 keys every command and node already reads (``hinges.stiffness``,
 ``hinges.damping_ratio``, ``hinges.overrides``, ``hinges.damping_overrides``,
-``air.drag_coefficient``), plus an informational ``calibration`` section.
+``air.drag_coefficient``), plus the fit's figures as the informational
+``calibration.deployment`` entry.
 
 With one factor per kind (``per`` scale) the factors go into the scene's
 own stiffness and c/k (c_i = s_c c_i,scene and k_i = s_k k_i,scene give
@@ -54,9 +55,11 @@ def calibrated_data(scene, result: CalibrationResult, collisions: dict | None = 
         data["hinges"] = hinges
     if "drag" in p.fit:
         data["air"] = {**(data.get("air") or {}), "drag_coefficient": value["drag"]}
-    data["calibration"] = calibration_section(result)
+    section = calibration_section(result)
     if collisions is not None:
-        data["calibration"]["first_collision"] = collisions
+        section["first_collision"] = collisions
+    # Beside what other calibrations of the scene wrote (a free-vibration test's figures).
+    data["calibration"] = {**(data.get("calibration") or {}), "deployment": section}
     return data
 
 

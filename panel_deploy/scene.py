@@ -658,5 +658,6 @@ def describe_schema() -> str:
                          "required" if f.default is None and name == "array" and f.name not in ("mass", "density")
                          else repr(f.default), f.metadata["doc"]))
     rows.append(("gravity", "[x, y, z]", "m/s^2", repr(Scene.gravity), TOP_LEVEL["gravity"][2]))
+    rows.append(("calibration", "mapping", "", "None", TOP_LEVEL["calibration"][2]))
     widths = [max(len(r[i]) for r in rows) for i in range(4)]
     return "\n".join("  ".join(r[i].ljust(widths[i]) for i in range(4)) + "  " + r[4] for r in rows)

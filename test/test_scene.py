@@ -183,6 +183,14 @@ def test_schema_lists_every_section():
         assert key in text
 
 
+def test_a_scene_takes_a_calibration_section_and_refuses_one_that_is_no_mapping():
+    data = dict(load_scene(PAPER).data)
+    assert scene_from_dict({**data, "calibration": {"fitted": ["damping"]}}).data["calibration"]
+    with pytest.raises(SceneError, match="calibration: expected a mapping"):
+        scene_from_dict({**data, "calibration": [1, 2]})
+    assert "calibration" in describe_schema()
+
+
 def test_overrides_set_keys_before_validation():
     s = load_scene(PAPER, ["gravity=[0, 0, 0]", "simulation.t_end=0.5",
                            "optimisation.bounds=[0.01, 0.1]"])

@@ -158,21 +158,45 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--namespace", help="the array to show, in a recording of several (e.g. array1)")
     s.set_defaults(func=_command("replay", "replay_command"))
 
-    s = sub.add_parser("calibrate", help="hinge damping from recordings: free-vibration tests")
-    s.add_argument("--free-vibration", nargs="+", required=True, metavar="RECORDING.mcap",
-                   help="recordings of one panel swinging on one hinge: c and k per test "
-                        "(log decrement and fit) and pooled")
-    s.add_argument("--scene", help="the scene whose damping to set (file or shipped name); "
-                                   "default: the first recording's rig")
+    s = sub.add_parser("calibrate", help="fit hinge damping, stiffness and air drag to recorded "
+                                         "deployments, or damping to free-vibration tests; write "
+                                         "the calibrated scene")
+    s.add_argument("recordings", nargs="*", metavar="RECORDING",
+                   help="MCAP recordings of deployments of the same array (their /joint_states)")
+    s.add_argument("--free-vibration", nargs="+", metavar="RECORDING.mcap",
+                   help="instead: recordings of one panel swinging on one hinge: c and k per "
+                        "test (log decrement and fit) and pooled")
+    s.add_argument("--scene", help="the scene to calibrate and write (file or shipped name); "
+                                   "default: the one the first recording ran (free vibration: "
+                                   "its rig)")
+    s.add_argument("--out", metavar="CALIBRATED.yaml",
+                   help="the scene with the fitted values and a calibration section (needed "
+                        "for deployments)")
+    s.add_argument("--fit", metavar="KIND,KIND",
+                   help="deployments: what to fit, comma-separated: damping, stiffness, drag "
+                        "(default damping,stiffness; drag needs air.density > 0)")
+    s.add_argument("--per", metavar="scale|group",
+                   help="deployments: scale: one factor on every hinge's k and c (the c/k "
+                        "becomes hinges.damping_ratio); group: one per stiffness group")
+    s.add_argument("--plot", metavar="FILE.png",
+                   help="deployments: measured vs nominal vs fitted angles, residuals")
+    s.add_argument("--until", type=float, metavar="SECONDS",
+                   help="deployments: fit only the joint states up to this long after each "
+                        "recording's first stamp (e.g. up to the first collision)")
+    s.add_argument("--max-evaluations", type=int,
+                   help="deployments: residual evaluations of the fit at most (each iteration: "
+                        "one, plus a Jacobian of one simulation per parameter; default 50)")
+    s.add_argument("--quiet", action="store_true", help="deployments: no progress lines")
     s.add_argument("--rig", dest="rig_scene", metavar="SCENE",
-                   help="the rig's scene (one panel on one hinge), for recordings that carry none")
-    s.add_argument("--hinge", help="set this hinge's damping_overrides entry to c instead of "
-                                   "the scene's damping_ratio to c/k")
-    s.add_argument("--out", metavar="CALIBRATED.yaml", help="write the calibrated scene")
+                   help="free vibration: the rig's scene (one panel on one hinge), for "
+                        "recordings that carry none")
+    s.add_argument("--hinge", help="free vibration: set this hinge's damping_overrides entry to c "
+                                   "instead of the scene's damping_ratio to c/k")
+    s.add_argument("--json", action="store_true",
+                   help="free vibration: print the calibration as one JSON object")
     s.add_argument("--namespace", help="the array whose joint states to read (e.g. array1)")
-    s.add_argument("--json", action="store_true", help="print the calibration as one JSON object")
     add_set(s)
-    s.set_defaults(func=_command("free_vibration", "free_vibration_command"))
+    s.set_defaults(func=_command("calibrate", "calibrate_command"))
 
     s = sub.add_parser("export", help="export the model (MuJoCo MJCF)")
     s.add_argument("scene")

@@ -35,7 +35,7 @@ OUTPUTS = {
     "fold": (("plot", "--plot"),),
     "replay": (("save", "--save"), ("png", "--png")),
     "bench": (("out", "--out"), ("plot", "--plot")),
-    "calibrate": (("out", "--out"),),
+    "calibrate": (("out", "--out"), ("plot", "--plot")),
 }
 
 
@@ -48,7 +48,8 @@ INPUTS = {
     "fold": (("scene", "--scene"),),
     "replay": (("recording", "recording"), ("scene", "--scene")),
     "bench": (("scene", "scene"),),
-    "calibrate": (("scene", "--scene"), ("rig_scene", "--rig")),
+    "calibrate": (("recordings", "RECORDING"), ("free_vibration", "--free-vibration"),
+                  ("scene", "--scene"), ("rig_scene", "--rig")),
 }
 
 #: Output flags that write a picture, in the format of the file name's suffix.
@@ -63,7 +64,7 @@ def check_args(args) -> None:
     outputs = [(getattr(args, attr, None), flag) for attr, flag in OUTPUTS.get(command, ())]
     inputs = [(resolve_scene(path) if "scene" in attr else path, flag)
               for attr, flag in INPUTS.get(command, ())
-              if (path := getattr(args, attr, None)) is not None]
+              for path in _given(getattr(args, attr, None))]
     earlier = []
     args.stdout_output = None  # the flag writing standard output: human lines go to stderr
     for path, flag in outputs:
@@ -89,6 +90,13 @@ def check_args(args) -> None:
     check = _CHECKS.get(command)
     if check is not None:
         check(args)
+
+
+def _given(value) -> list:
+    """The paths an argument holds: none, one, or a list (several positional files)."""
+    if value is None:
+        return []
+    return list(value) if isinstance(value, list) else [value]
 
 
 def _same_file(output, other) -> bool:
@@ -185,16 +193,54 @@ def _replay(args):
                                            "choose a free one with --port") from None
 
 
+#: What ``calibrate`` fits of recorded deployments unless ``--fit`` says.
+DEFAULT_FIT = "damping,stiffness"
+
+
 def _calibrate(args):
-    if args.out is None:
-        # these only shape the scene --out writes: without it they would be ignored
-        for flag, given in (("--scene", args.scene), ("--hinge", args.hinge), ("--set", args.set)):
+    deployment = ("--fit", args.fit is not None), ("--per", args.per is not None), \
+        ("--plot", args.plot is not None), ("--until", args.until is not None), \
+        ("--max-evaluations", args.max_evaluations is not None), ("--quiet", args.quiet)
+    if args.free_vibration:
+        if args.recordings:
+            raise SceneError("RECORDING", "give deployments or --free-vibration tests, not both")
+        for flag, given in deployment:
             if given:
-                raise SceneError(flag, "only with --out CALIBRATED.yaml (the scene it shapes)")
-    for recording in args.free_vibration:
-        if args.out is not None and _same_file(args.out, recording):
-            raise SceneError("--out", f"{args.out} is also the recording {recording}: writing it "
-                                      "would destroy the input; give another file")
+                raise SceneError(flag, "only for recorded deployments, not with --free-vibration")
+        if args.out is None:
+            # these only shape the scene --out writes: without it they would be ignored
+            for flag, given in (("--scene", args.scene), ("--hinge", args.hinge), ("--set", args.set)):
+                if given:
+                    raise SceneError(flag, "only with --out CALIBRATED.yaml (the scene it shapes)")
+        return
+    if not args.recordings:
+        raise SceneError("RECORDING", "give the recordings of deployments to fit (or "
+                                      "--free-vibration RECORDING.mcap ... for swing tests)")
+    for flag, given in (("--rig", args.rig_scene), ("--hinge", args.hinge), ("--json", args.json)):
+        if given:
+            raise SceneError(flag, "only with --free-vibration")
+    if args.out is None:
+        raise SceneError("--out", "required: the calibrated scene CALIBRATED.yaml to write")
+    args.fit = DEFAULT_FIT if args.fit is None else args.fit
+    args.per = "scale" if args.per is None else args.per
+    args.max_evaluations = 50 if args.max_evaluations is None else args.max_evaluations
+    from ..calibrate.parameters import KINDS, PER
+
+    kinds = [kind.strip() for kind in str(args.fit).split(",")]
+    for kind in kinds:
+        if kind not in KINDS:
+            raise SceneError("--fit", f"no parameter {shown(kind)} to fit (expected some of "
+                                      f"{', '.join(KINDS)}, comma-separated)")
+    if len(set(kinds)) != len(kinds):
+        raise SceneError("--fit", f"{shown(args.fit)} names a parameter twice")
+    args.fit = ",".join(kinds)
+    if args.per not in PER:
+        raise SceneError("--per", f"expected one of {', '.join(PER)}, got {shown(args.per)}")
+    _positive_int(args, "max_evaluations", "--max-evaluations", low=1)
+    if args.until is not None:
+        finite_number(args.until, "--until", low=0, low_open=True)
+    if len(set(map(str, args.recordings))) != len(args.recordings):
+        raise SceneError("RECORDING", "a recording is given twice: it would count twice in the fit")
 
 
 _CHECKS = {"fold": _fold, "optimise": _optimise, "bench": _bench, "replay": _replay,

@@ -4,6 +4,7 @@ import itertools
 import json
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,14 +15,18 @@ from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from panel_deploy import contract
+from panel_deploy.build import build_model
+from panel_deploy.cli import main
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_states
 from panel_deploy.configure import DynamicsParameters, configure
 from panel_deploy.nodes import load, messages
 from panel_deploy.scene import load_scene, resolve_scene
+from panel_deploy.scene_text import scene_from_yaml
 from ros_harness import Client, NodeProcess, wait_for
 
 T_END, RATE = 0.5, 200.0
@@ -284,6 +289,35 @@ def test_sigint_mid_deployment_stops_it_and_ends_cleanly(compiled_nodes):
         outcome, = [s for d in diagnostics for s in d.status if s.name == "/interrupted/dynamics"]
         assert outcome.message.startswith("stopped at t = "), outcome.message
         assert int(messages.values(outcome)["samples"]) < 401
+    finally:
+        client.close()
+        model.stop()
+        dynamics.stop()
+
+
+def test_a_calibrated_scene_deploys_as_written(compiled_nodes, tmp_path):
+    """What ``panel-deploy calibrate`` writes is a scene file array_model takes: the
+    dynamics node deploys its fitted k and c/k (a 2-evaluation fit: the values differ
+    from the scene's, which is what is checked, not the fit)."""
+    path = tmp_path / "calibrated.yaml"
+    bag = str(Path(__file__).resolve().parent.parent / "bags" / "paper_4x4_uniform.mcap")
+    main(["calibrate", bag, "--until", "0.3", "--max-evaluations", "2", "--quiet",
+          "--out", str(path)])  # exit 1: the budget ran out, the best fit is written
+    calibrated = build_model(load_scene(path))
+    nominal = build_model(load_scene(resolve_scene("paper_4x4")))
+    assert [h.k for h in calibrated.hinges] != [h.k for h in nominal.hinges]
+    model = NodeProcess("array_model", f"scene:={path}", namespace="/calibrated")
+    dynamics = NodeProcess("dynamics", "t_end:=0.05", "real_time_factor:=0.0",
+                           namespace="/calibrated")
+    client = Client("calibrated_test")
+    scenes = client.listen(String, "/calibrated/dynamics/scene", messages.qos(contract.LATCHED))
+    try:
+        goal = client.start_goal(contract.DEPLOY, "/calibrated/dynamics")
+        assert goal.result().success, goal.result().message
+        wait_for(lambda: scenes, what="the deployed scene")
+        deployed = build_model(scene_from_yaml(scenes[-1].data))
+        assert [h.k for h in deployed.hinges] == pytest.approx([h.k for h in calibrated.hinges])
+        assert [h.c for h in deployed.hinges] == pytest.approx([h.c for h in calibrated.hinges])
     finally:
         client.close()
         model.stop()

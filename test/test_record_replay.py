@@ -162,3 +162,39 @@ def test_serve_binds_loopback_only_and_stops_on_sigint(recording):
         if proc.poll() is None:
             os.kill(proc.pid, signal.SIGKILL)
             proc.wait()
+
+
+def test_compare_shows_a_scene_s_deployment_beside_the_recorded_one(recording, model, tmp_path,
+                                                                     capsys):
+    """The recording's own scene as the comparison: its model's boxes and hinge angles,
+    at the same times, are the recorded ones (to the interpolation and tolerance)."""
+    import rerun as rr
+    from panel_deploy.record.analysis import read_deployment
+    from panel_deploy.record.compare import compared
+
+    rrd = tmp_path / "both.rrd"
+    assert main(["replay", str(recording), "--compare", "paper_4x4", "--save", str(rrd)]) == 0
+    assert "beside it: paper_4x4 released at 0.0000 s" in capsys.readouterr().err
+    values, times = _entities(rrd)
+    stamps = {round(k * 5e6) for k in range(401)}
+    for body in model.bodies:
+        entity = "/world/model/" + rr.escape_entity_path_part(body.name)
+        assert len(values[entity]["Transform3D:translation"]) == 401 and times[entity] == stamps
+    d = read_deployment(recording)
+    beside = compared(d, d.scene, "paper_4x4")
+    before = d.track.t <= 0.41  # up to the first collision: after it neither is physics
+    assert np.abs(beside.theta[before] - np.asarray(d.track.theta)[before]).max() < 1e-4
+    hinges = [e for e in values if e.startswith("/hinges/") and e.endswith("/model")]
+    assert len(hinges) == model.n_coords
+
+
+@pytest.mark.parametrize("args, parts", [
+    (["--release", "0.1"], ["--release", "only with --compare"]),
+    (["--compare", "free_vibration_rig"], ["--compare", "another array"]),
+    (["--compare", "paper_4x4", "--png", "x.png"], ["--compare", "not in --png"]),
+])
+def test_compare_refusals_are_one_line(recording, tmp_path, capsys, args, parts):
+    out = ["--save", str(tmp_path / "x.rrd")] if "--png" not in args else []
+    assert main(["replay", str(recording), *args, *out]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(p in err[0] for p in parts), err

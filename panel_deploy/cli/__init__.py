@@ -156,6 +156,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--scene", help="the recording's scene (file or shipped name); default: "
                                    "the one it ran")
     s.add_argument("--namespace", help="the array to show, in a recording of several (e.g. array1)")
+    s.add_argument("--compare", metavar="SCENE",
+                   help="also show this scene's simulated deployment at the same times (e.g. "
+                        "a calibrated scene beside the deployment it was fitted to)")
+    s.add_argument("--release", type=float, metavar="SECONDS",
+                   help="with --compare: release its model this long after the recording's "
+                        "first joint state (default: the offset calibrate found, else 0)")
     s.set_defaults(func=_command("replay", "replay_command"))
 
     s = sub.add_parser("calibrate", help="fit hinge damping, stiffness and air drag to recorded "

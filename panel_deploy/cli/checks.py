@@ -46,7 +46,7 @@ INPUTS = {
     "run": (("scene", "scene"),),
     "export": (("scene", "scene"),),
     "fold": (("scene", "--scene"),),
-    "replay": (("recording", "recording"), ("scene", "--scene")),
+    "replay": (("recording", "recording"), ("scene", "--scene"), ("compare", "--compare")),
     "bench": (("scene", "scene"),),
     "calibrate": (("recordings", "RECORDING"), ("free_vibration", "--free-vibration"),
                   ("scene", "--scene"), ("rig_scene", "--rig")),
@@ -177,6 +177,12 @@ def _picture_format(path, flag):
 
 def _replay(args):
     finite_number(args.port, "--port", low=1, high=65535, integer=True)
+    if args.release is not None:
+        if not args.compare:
+            raise SceneError("--release", "only with --compare SCENE (the model it releases)")
+        finite_number(args.release, "--release")
+    if args.compare and args.png and not (args.save or args.spawn or args.serve):
+        raise SceneError("--compare", "shown in rerun (--save, --spawn, --serve), not in --png")
     save = getattr(args, "save", None)
     if save is not None and Path(save).suffix != ".rrd" and not in_place(save):
         # A rerun file under another name would replace whatever had it (a scene, a bag);

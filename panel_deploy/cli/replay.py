@@ -39,6 +39,7 @@ def replay_command(args) -> int:
                                     "a file with --save OUT.rrd, serve with --serve or render "
                                     "--png STRIP.png")
     d = read_deployment(args.recording, args.scene, args.namespace)
+    beside = _compared(d, args) if args.compare else None
     if args.png:
         render_strip(d, at, args.png)
         print(f"{len(at)} frames -> {args.png}")
@@ -66,7 +67,7 @@ def replay_command(args) -> int:
         except RuntimeError as e:
             raise SceneError("--spawn", f"cannot start the rerun viewer ({e}); write a file "
                                         f"with --save OUT.rrd or serve with --serve") from None
-    frames = log_deployment(stream, d)
+    frames = log_deployment(stream, d, beside)
     try:
         stream.flush(timeout_sec=30.0)
     except RuntimeError as e:  # a viewer that did not start (no display) or went away
@@ -82,9 +83,22 @@ def replay_command(args) -> int:
     # flushed: with --serve this line (the address) must reach a pipe before the wait
     print(f"{frames} frames of {d.recording.path} -> {target}", flush=True)
     d.print_notes()
+    if beside is not None:
+        print(f"beside it: {beside.source} released at {beside.release:.4f} s"
+              + ("" if beside.success else f" (its simulation failed: {beside.message})"),
+              file=sys.stderr)
     if args.serve:
         try:
             threading.Event().wait()
         except KeyboardInterrupt:
             print("panel-deploy: stopped serving", file=sys.stderr)
     return 0
+
+
+def _compared(d, args):
+    """``--compare SCENE``'s deployment at the recording's times, ``--set`` not applied
+    (the scene is compared as written)."""
+    from ..record.compare import compared
+    from ..scene import load_scene, resolve_scene
+
+    return compared(d, load_scene(resolve_scene(args.compare)), args.compare, args.release)

@@ -16,6 +16,9 @@ frame per joint state):
 - ``distance/d``: the smallest distance between panels that share no hinge
   (m), up to the first collision.
 - ``events``: one text line per first-collision event, at its sample.
+- ``world/model/<body>``, ``hinges/<name>/model``: with ``compared`` (``replay
+  --compare SCENE``, :mod:`.compare`), that scene's simulated deployment at the
+  same times, grey boxes beside the measured ones.
 - ``monitor``: what the recording's own collision monitor said, as recorded
   (``CollisionEvent`` and ``MonitorVerdict`` messages: each event, and each
   verdict that changes level or text), at its stamp on the same timeline; a
@@ -34,14 +37,20 @@ TIMELINE = "sim_time"
 PANEL_RGBA = (64, 115, 217, 255)
 GROUND_RGBA = (217, 140, 51, 255)
 HIT_RGBA = (242, 38, 26, 255)
+MODEL_RGBA = (160, 160, 160, 110)
 
 
 def body_poses(d: RecordedDeployment):
     """``(R, p)``: every body's rotation (s, nb, 3, 3) and centroid (s, nb, 3, m) at every sample."""
+    return poses(d.model, d.track.theta)
+
+
+def poses(model, thetas):
+    """``(R, p)`` of ``model``'s bodies at each row of tree angles ``thetas`` (rad)."""
     from ..kinematics import forward_kinematics
 
-    poses = [forward_kinematics(d.model, theta) for theta in d.track.theta]
-    return np.array([R for R, _ in poses]), np.array([p for _, p in poses])
+    out = [forward_kinematics(model, theta) for theta in thetas]
+    return np.array([R for R, _ in out]), np.array([p for _, p in out])
 
 
 def energies(d: RecordedDeployment) -> dict:
@@ -119,8 +128,9 @@ def _path(*parts) -> str:
     return "/".join(rr.escape_entity_path_part(p) for p in parts)
 
 
-def log_deployment(stream, d: RecordedDeployment) -> int:
-    """Log ``d`` to the rerun ``stream``; returns the frames logged (one per joint state)."""
+def log_deployment(stream, d: RecordedDeployment, compared=None) -> int:
+    """Log ``d`` (and a :class:`~.compare.Compared` deployment beside it) to the
+    rerun ``stream``; returns the frames logged (one per joint state)."""
     import rerun as rr
 
     t = d.track.t
@@ -159,6 +169,17 @@ def log_deployment(stream, d: RecordedDeployment) -> int:
                                         level=rr.TextLogLevel.ERROR))
         stream.log(_path("world", "collisions"), rr.Points3D([e.point], colors=[HIT_RGBA],
                                                              radii=[0.004]))
+    if compared is not None:
+        Rm, pm = poses(compared.model, compared.theta)
+        for b, body in enumerate(compared.model.bodies):
+            path = _path("world", "model", body.name)
+            stream.log(path, rr.Boxes3D(half_sizes=[np.asarray(body.size) / 2],
+                                        colors=[MODEL_RGBA]), static=True)
+            stream.send_columns(path, time, rr.Transform3D.columns(translation=pm[:, b],
+                                                                   mat3x3=Rm[:, b]))
+        for k, name in enumerate(compared.names):
+            stream.send_columns(_path("hinges", name, "model"), time,
+                                rr.Scalars.columns(scalars=compared.theta[:, k]))
     levels = (rr.TextLogLevel.INFO, rr.TextLogLevel.WARN, rr.TextLogLevel.ERROR)
     for when, level, text in recorded_monitor(d):
         stream.set_time(TIMELINE, duration=_duration(max(when, 0.0)))

@@ -198,3 +198,17 @@ def test_compare_refusals_are_one_line(recording, tmp_path, capsys, args, parts)
     assert main(["replay", str(recording), *args, *out]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and all(p in err[0] for p in parts), err
+
+
+def test_collide_compare_checks_the_scene_s_deployment_on_the_recording_s_times(recording,
+                                                                                  capsys):
+    import json
+
+    assert main(["collide", str(recording), "--compare", "paper_4x4", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    ours, theirs = out["compared"]["first_collision"], out["first_collision"]
+    assert out["compared"]["scene"] == "paper_4x4" and out["compared"]["release"] == 0.0
+    assert ours["pair"] == theirs["pair"] and ours["sample"] == theirs["sample"]
+    assert abs(ours["t"] - theirs["t"]) < 1e-4
+    assert main(["collide", str(recording), "--release", "0.1"]) == 2
+    assert "--release: only with --compare" in capsys.readouterr().err

@@ -118,6 +118,12 @@ def build_parser() -> argparse.ArgumentParser:
                                    "the one it ran")
     s.add_argument("--namespace", help="the array whose joint states to check, in a recording "
                                        "of several (e.g. array1)")
+    s.add_argument("--compare", metavar="SCENE",
+                   help="also check this scene's deployment on the recording's times (e.g. a "
+                        "calibrated scene: its first collision beside the recorded one)")
+    s.add_argument("--release", type=float, metavar="SECONDS",
+                   help="with --compare: release its model this long after the recording's "
+                        "first joint state (default: the offset calibrate found, else 0)")
     s.add_argument("--json", action="store_true")
     add_set(s)
     s.set_defaults(func=_command("collide", "collide_command"))

@@ -175,12 +175,17 @@ def _picture_format(path, flag):
                                f"{', '.join(sorted(formats))})")
 
 
-def _replay(args):
-    finite_number(args.port, "--port", low=1, high=65535, integer=True)
+def _release(args):
+    """``--release`` (of collide and replay): a number, and only with ``--compare``."""
     if args.release is not None:
         if not args.compare:
             raise SceneError("--release", "only with --compare SCENE (the model it releases)")
         finite_number(args.release, "--release")
+
+
+def _replay(args):
+    finite_number(args.port, "--port", low=1, high=65535, integer=True)
+    _release(args)
     if args.compare and args.png and not (args.save or args.spawn or args.serve):
         raise SceneError("--compare", "shown in rerun (--save, --spawn, --serve), not in --png")
     save = getattr(args, "save", None)
@@ -250,4 +255,4 @@ def _calibrate(args):
 
 
 _CHECKS = {"fold": _fold, "optimise": _optimise, "bench": _bench, "replay": _replay,
-           "calibrate": _calibrate}
+           "collide": _release, "calibrate": _calibrate}

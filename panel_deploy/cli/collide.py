@@ -26,13 +26,17 @@ def collide_command(args) -> int:
     first, so this is a safety net).
     """
     overrides = getattr(args, "set", None) or ()
-    verdict, notes = None, None
+    verdict, notes, beside = None, None, None
     if is_mcap(args.trajectory):
         from ..record.analysis import check_recording, read_deployment
         d = read_deployment(args.trajectory, args.scene, args.namespace, overrides)
         stream, report = check_recording(d)
         result, level_text, notes = d.track, stream.verdict()[:2], d.print_notes
         verdict = {"level": level_text[0], "message": level_text[1]}
+        beside = _compared(d, args) if args.compare else None
+    elif args.compare or args.release is not None:
+        raise SceneError("--compare" if args.compare else "--release",
+                         "only for an MCAP recording (the motion it compares with)")
     else:
         if args.scene or args.namespace:
             raise SceneError("--scene" if args.scene else "--namespace",
@@ -50,6 +54,9 @@ def collide_command(args) -> int:
         return 1
     if verdict is not None:
         out["verdict"] = verdict
+    if verdict is not None and beside is not None:
+        out["compared"] = {"scene": beside[0].source, "release": beside[0].release,
+                           **beside[1].to_dict()}
     if args.json:
         if failed:  # the run stopped early: the check covers only what it computed
             out["run"] = {"success": False, "status": int(result.status), "message": result.message,
@@ -62,9 +69,23 @@ def collide_command(args) -> int:
         print(report.to_text())
         if verdict is not None and verdict["level"] == 1:
             print(f"stream: {verdict['message']}")
+        if verdict is not None and beside is not None:
+            print(f"beside it, {beside[0].source} released at {beside[0].release:.4f} s, on the "
+                  f"same times:\n{beside[1].to_text()}")
     if notes is not None:
         notes()
     return 0
+
+
+def _compared(d, args):
+    """``(Compared, report)``: ``--compare SCENE``'s deployment beside the recording
+    and its collision check with the recording's collision settings."""
+    from ..collision import CollisionSettings
+    from ..record.compare import collision_report, compared
+    from ..scene import load_scene, resolve_scene
+
+    beside = compared(d, load_scene(resolve_scene(args.compare)), args.compare, args.release)
+    return beside, collision_report(beside, d, CollisionSettings.from_scene(d.scene))
 
 
 def scene_with(scene, overrides):

@@ -6,7 +6,8 @@ The scene's model must be the recording's array (same bodies and hinges). It is
 deployed from the stowed state, released ``release`` s after the recording's first
 joint state (by default the release offset a ``calibrate`` fit of this recording
 found and wrote under ``calibration.deployment``, else 0), and sampled at the
-recording's joint-state times (:mod:`panel_deploy.calibrate.trajectory`).
+recording's joint-state times (:mod:`panel_deploy.calibrate.trajectory`);
+:func:`collision_report` checks it there as ``collide`` checks the recording.
 """
 
 from __future__ import annotations
@@ -85,3 +86,16 @@ def compared(d: RecordedDeployment, scene, source: str, release: float | None = 
     trajectory = simulate_hinges(model, scene.simulation, span, names)
     return Compared(source, model, release, names, trajectory.angles(d.track.t - release),
                     trajectory.success, trajectory.message)
+
+
+def collision_report(beside: Compared, d: RecordedDeployment, settings):
+    """The collision check of ``beside``'s deployment on the recording's own
+    times, as :func:`~panel_deploy.record.analysis.check_recording` checks the
+    recording (positions only: Eq. 7 from the samples): its
+    :class:`~panel_deploy.collision.check.CollisionReport`."""
+    from ..collision import StreamCheck
+
+    stream = StreamCheck(beside.model, settings)
+    for t, theta in zip(d.track.t, beside.theta):
+        stream.update(float(t), theta)
+    return stream.check.report()

@@ -18,7 +18,7 @@ import sys
 import threading
 
 from ..errors import PanelDeployError, shown
-from .args import add_set, alias
+from .args import add_compare, add_set, alias
 
 
 def _command(module: str, name: str):
@@ -118,12 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "the one it ran")
     s.add_argument("--namespace", help="the array whose joint states to check, in a recording "
                                        "of several (e.g. array1)")
-    s.add_argument("--compare", metavar="SCENE",
-                   help="also check this scene's deployment on the recording's times (e.g. a "
-                        "calibrated scene: its first collision beside the recorded one)")
-    s.add_argument("--release", type=float, metavar="SECONDS",
-                   help="with --compare: release its model this long after the recording's "
-                        "first joint state (default: the offset calibrate found, else 0)")
+    add_compare(s, "also check this scene's deployment on the recording's times (e.g. a "
+                   "calibrated scene: its first collision beside the recorded one)")
     s.add_argument("--json", action="store_true")
     add_set(s)
     s.set_defaults(func=_command("collide", "collide_command"))
@@ -162,12 +158,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--scene", help="the recording's scene (file or shipped name); default: "
                                    "the one it ran")
     s.add_argument("--namespace", help="the array to show, in a recording of several (e.g. array1)")
-    s.add_argument("--compare", metavar="SCENE",
-                   help="also show this scene's simulated deployment at the same times (e.g. "
-                        "a calibrated scene beside the deployment it was fitted to)")
-    s.add_argument("--release", type=float, metavar="SECONDS",
-                   help="with --compare: release its model this long after the recording's "
-                        "first joint state (default: the offset calibrate found, else 0)")
+    add_compare(s, "also show this scene's simulated deployment at the same times (e.g. a "
+                   "calibrated scene beside the deployment it was fitted to)")
     s.set_defaults(func=_command("replay", "replay_command"))
 
     s = sub.add_parser("calibrate", help="fit hinge damping, stiffness and air drag to recorded "

@@ -31,6 +31,14 @@ class SceneKey(argparse.Action):
         setattr(namespace, self.dest, value)
 
 
+def add_compare(parser, help_text: str) -> None:
+    """``--compare SCENE`` and its ``--release`` (collide and replay of a recording)."""
+    parser.add_argument("--compare", metavar="SCENE", help=help_text)
+    parser.add_argument("--release", type=float, metavar="SECONDS",
+                        help="with --compare: release its model this long after the recording's "
+                             "first joint state (default: the offset calibrate found, else 0)")
+
+
 def add_set(parser) -> None:
     """``--set KEY=VALUE``, repeatable."""
     parser.add_argument("--set", action="append", metavar="KEY=VALUE",

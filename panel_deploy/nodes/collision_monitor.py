@@ -213,10 +213,16 @@ class CollisionMonitorNode(Node):
                 batch = list(self._pending)
                 self._pending.clear()
             with self._lock:
-                for i, (stream, t, *sample, received) in enumerate(batch):
+                newest = max((i for i, item in enumerate(batch) if not isinstance(item, int)),
+                             default=-1)
+                for i, item in enumerate(batch):
+                    if isinstance(item, int):  # the driver's sample count, in its place
+                        self._expected = item
+                        continue
+                    stream, t, *sample, received = item
                     if stream is not self.stream:
                         continue  # read against a model that has since been replaced
-                    late = (self._max_lag > 0 and received and i < len(batch) - 1
+                    late = (self._max_lag > 0 and received and i < newest
                             and (time.time_ns() - received) * 1e-9 > self._max_lag)
                     if not (late and stream.skip(t, self._skip_span)):
                         self._check(stream, t, *sample)
@@ -272,7 +278,11 @@ class CollisionMonitorNode(Node):
             if s.name == self._dynamics and self.stream is not None:
                 samples = messages.values(s).get("samples")
                 if samples is not None:
-                    self._expected = samples
+                    # Queued behind the joint states read before it: the worker takes it
+                    # after them, so a deployment it has yet to start cannot clear it.
+                    with self._queued:
+                        self._pending.append(samples)
+                        self._queued.notify()
 
     def _on_incompatible_qos(self, event):
         policy = getattr(event.last_policy_kind, "name", str(event.last_policy_kind))

@@ -30,10 +30,13 @@ def executable(name: str) -> str:
 
 
 def wait_for(condition, timeout=60.0, what="condition"):
+    """Poll ``condition`` until true; ``what`` (text, or a callable giving it at
+    the timeout, to say what state it was left in) names it in the failure."""
     end = time.monotonic() + timeout
     while not condition():
         if time.monotonic() > end:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+            raise AssertionError(f"timed out after {timeout} s waiting for "
+                                 f"{what() if callable(what) else what}")
         time.sleep(0.02)
 
 

@@ -57,7 +57,7 @@ def _deploy_both(client):
     client.node.create_subscription(TFMessage, "/tf", raw.append, messages.qos(contract.EVENTS), raw=True)
     wait_for(lambda: client.node.count_publishers("/tf") >= len(ARRAYS), what="the /tf publishers")
     for ns in ARRAYS:
-        client.start_goal(contract.DEPLOY, f"{ns}/dynamics")
+        client.start_goal(contract.DEPLOY, f"{ns}/dynamics", wait_for_subscribers=1)
 
     def prefixed(box, prefix):
         return [m for m in list(box) if m.transforms[0].header.frame_id.startswith(prefix)]

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import fold
+from .contacts import with_panel_contacts
 from .errors import DesignError, SceneError, shown
 from .model import AirParameters, Body, ClosureParameters, Hinge, Model, box_inertia
 from .scene import Scene
@@ -174,14 +175,17 @@ def build_model(scene: Scene, design=None) -> Model:
     ground = body_of[ground_cell]
     groups = _hinge_groups(scene, d, hinges, bodies[ground].cells)
     try:
-        return Model.build(bodies, hinges, ground, cut_hinges=cuts, k_s=scene.contact.k_s,
-                           c_s=scene.contact.c_s, closure=closure, gravity=scene.gravity,
-                           name=scene.name or "", hinge_groups=groups,
-                           air=AirParameters(scene.air.density, scene.air.drag_coefficient))
+        model = Model.build(bodies, hinges, ground, cut_hinges=cuts, k_s=scene.contact.k_s,
+                            c_s=scene.contact.c_s, closure=closure, gravity=scene.gravity,
+                            name=scene.name or "", hinge_groups=groups,
+                            air=AirParameters(scene.air.density, scene.air.drag_coefficient))
     except Exception as e:  # ModelError from a bad cut list
         if cuts is not None:
             raise SceneError("closure.cut_hinge", str(e)) from None
         raise
+    if scene.contact.panels:
+        model = with_panel_contacts(model, scene.contact.k_p, scene.contact.c_p)
+    return model
 
 
 def _symmetries(rows, cols):

@@ -240,6 +240,11 @@ class Model:
         and mirror symmetry); empty: every hinge on its own.
     air : AirParameters
         Air drag on the panel faces (default: none).
+    contact_pairs : tuple of (int, int)
+        Unhinged body pairs that touch in the stowed stacks, i < j: the
+        panel contacts of :mod:`panel_deploy.contacts` (default: none).
+    k_p, c_p : float
+        Normal stiffness (N/m) and damping (N s/m) of a panel contact.
     """
 
     bodies: tuple
@@ -258,6 +263,9 @@ class Model:
     name: str = ""
     hinge_groups: tuple = ()
     air: AirParameters = AirParameters()
+    contact_pairs: tuple = ()
+    k_p: float = 0.0
+    c_p: float = 0.0
 
     def __post_init__(self):
         _freeze(self, gravity=(3,))

@@ -310,6 +310,12 @@ class ContactSection:
                       "joint-limit contact stiffness, Eq. (4)")
     c_s: float = spec(0.5, number(0.0, 1e6, why=_WHY_STIFF), "N m s/rad",
                       "joint-limit contact damping, Eq. (4)")
+    panels: bool = spec(True, boolean, "",
+                        "contact between unhinged panels that touch in the stowed stacks")
+    k_p: float = spec(1.0e6, number(0, 1e11, low_open=True, why=_WHY_STIFF), "N/m",
+                      "normal stiffness of one panel-to-panel contact pressed evenly")
+    c_p: float = spec(280.0, number(0.0, 1e8, why=_WHY_STIFF), "N s/m",
+                      "normal damping of one panel-to-panel contact")
 
 
 @dataclass(frozen=True)

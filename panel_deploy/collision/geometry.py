@@ -30,12 +30,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from itertools import product
 
 import fcl
 import numpy as np
 from numba import njit
 
+from ..boxes import SIGNS, corners, least_overlap, separation
 from ..model import Model
 
 CERTIFY_TOL = 1e-10
@@ -45,9 +45,8 @@ _ROUNDING = 1e-12
 """Slack (m) of :func:`box_distance`'s edge pruning, far above the rounding of
 coordinates (~1e-16 of their size, for a scene well under 1 km across)."""
 
-_SIGNS = np.array(list(product((-1.0, 1.0), repeat=3)))
 _EDGES = np.array([(i, j) for i in range(8) for j in range(i + 1, 8)
-                   if np.count_nonzero(_SIGNS[i] != _SIGNS[j]) == 1])
+                   if np.count_nonzero(SIGNS[i] != SIGNS[j]) == 1])
 
 
 @dataclass(frozen=True)
@@ -170,6 +169,7 @@ class BoxSet:
         The point is the centre of FCL's box-box contact manifold."""
         overlap, axis, along = least_overlap(self.rotation[i], self.position[i], self.half[i],
                                              self.rotation[j], self.position[j], self.half[j])
+        axis = np.array(axis)
         if overlap < 0.0:
             # FCL said "in contact" but an axis separates them: apart by a hair.
             self.exact_fallbacks += 1
@@ -187,7 +187,7 @@ class BoxSet:
 
     def corners(self, i: int) -> np.ndarray:
         """The 8 corners (8, 3) of box i, m."""
-        return self.position[i] + (_SIGNS * self.half[i]) @ self.rotation[i].T
+        return self.position[i] + (SIGNS * self.half[i]) @ self.rotation[i].T
 
     def _exact_distance(self, i, j):
         """Distance (m) of apart boxes i and j and its nearest points: :func:`box_distance`."""
@@ -244,64 +244,6 @@ def _certified(R, c, h, a, b, fcl_d, near):
 
 
 @njit(cache=True)
-def _radius(R, h, n):
-    """Half-extent (m) along the unit vector n (3,) of a box of rotation R (3, 3) and half edges h (3,)."""
-    r = 0.0
-    for k in range(3):
-        r += abs(n[0] * R[0, k] + n[1] * R[1, k] + n[2] * R[2, k]) * h[k]
-    return r
-
-
-@njit(cache=True)
-def separation(Ra, ca, ha, Rb, cb, hb, n):
-    """Gap (m) between the projections on the unit vector ``n`` (3,) of the boxes
-    (R (3, 3), centre c (3,), half edges h (3,), ground frame, m) a and b."""
-    along = n[0] * (cb[0] - ca[0]) + n[1] * (cb[1] - ca[1]) + n[2] * (cb[2] - ca[2])
-    return along - _radius(Ra, ha, n) - _radius(Rb, hb, n)
-
-
-@njit(cache=True)
-def least_overlap(Ra, ca, ha, Rb, cb, hb):
-    """Separating-axis test of boxes a and b (given as in :func:`separation`).
-
-    Over the 15 candidate axes (the 3 + 3 face normals, then the 9 edge cross
-    products a_i x b_j, in that order; near-parallel edge pairs skipped), the
-    axis of least overlap: returns ``(overlap, axis, along)`` with the overlap
-    (m, < 0 if that axis separates the boxes), the unit axis (3,) and the
-    centre offset ``(c_b - c_a) . axis`` (m) that gives its direction. The
-    first of equal overlaps wins.
-    """
-    best = np.inf
-    axis = np.zeros(3)
-    along_best = 0.0
-    u = np.empty(3)
-    for k in range(15):
-        if k < 3:
-            for m in range(3):
-                u[m] = Ra[m, k]
-        elif k < 6:
-            for m in range(3):
-                u[m] = Rb[m, k - 3]
-        else:
-            i, j = (k - 6) // 3, (k - 6) % 3
-            u[0] = Ra[1, i] * Rb[2, j] - Ra[2, i] * Rb[1, j]
-            u[1] = Ra[2, i] * Rb[0, j] - Ra[0, i] * Rb[2, j]
-            u[2] = Ra[0, i] * Rb[1, j] - Ra[1, i] * Rb[0, j]
-        norm = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
-        if norm <= 1e-9:
-            continue
-        for m in range(3):
-            u[m] /= norm
-        along = u[0] * (cb[0] - ca[0]) + u[1] * (cb[1] - ca[1]) + u[2] * (cb[2] - ca[2])
-        overlap = _radius(Ra, ha, u) + _radius(Rb, hb, u) - abs(along)
-        if overlap < best:
-            best = overlap
-            axis[:] = u
-            along_best = along
-    return best, axis, along_best
-
-
-@njit(cache=True)
 def pair_bounds(R, c, h, a, b):
     """Separating-axis overlap and a corner upper bound of many box pairs, m.
 
@@ -328,10 +270,10 @@ def corner_bound(R, c, h, i, j):
     q = np.empty(3)
     best = np.inf
     for x, y in ((i, j), (j, i)):
-        corners = _corners(R[x], c[x], h[x])
+        vx = corners(R[x], c[x], h[x])
         for m in range(8):
-            _clamp_to_box(corners[m], R[y], c[y], h[y], q)
-            best = min(best, _distance(corners[m], q))
+            _clamp_to_box(vx[m], R[y], c[y], h[y], q)
+            best = min(best, _distance(vx[m], q))
     return best
 
 
@@ -364,8 +306,8 @@ def _box_distance(Ra, ca, ha, Rb, cb, hb, lower):
     """:func:`box_distance`, stopping after the vertices when ``lower`` (m), a
     lower bound on the distance, or the separation along the best vertex
     pair's direction is within ``_ROUNDING`` of it (-inf: never)."""
-    va = _corners(Ra, ca, ha)
-    vb = _corners(Rb, cb, hb)
+    va = corners(Ra, ca, ha)
+    vb = corners(Rb, cb, hb)
     ua = np.empty((8, 3))  # a's corners in b's frame
     ub = np.empty((8, 3))
     best = np.inf
@@ -434,17 +376,6 @@ def box_signed_distance(Ra, ca, ha, Rb, cb, hb):
     if overlap > 0.0:
         return -overlap
     return _box_distance(Ra, ca, ha, Rb, cb, hb, -overlap)[0]
-
-
-@njit(cache=True)
-def _corners(R, c, h):
-    """The 8 corners (8, 3) of a box, m, in the order of ``_SIGNS``."""
-    out = np.empty((8, 3))
-    for k in range(8):
-        for m in range(3):
-            out[k, m] = c[m] + (_SIGNS[k, 0] * h[0] * R[m, 0] + _SIGNS[k, 1] * h[1] * R[m, 1]
-                                + _SIGNS[k, 2] * h[2] * R[m, 2])
-    return out
 
 
 @njit(cache=True)

@@ -417,7 +417,7 @@ def choose_scheme(P, y0) -> str:
     increasingly so at tight tolerances. Contacts that start later (k_s, c_s)
     are not foreseen: a tree that starts out of contact gets DOPRI5.
     """
-    return "ros34pw2" if 3.3 / stiffness(P, y0) < STIFF_STEP else "dopri5"
+    return "ros34pw2" if stiffness(P, y0) * STIFF_STEP > 3.3 else "dopri5"  # a model without stiffness: 0
 
 
 def _leading_finite(rows, done, upto):

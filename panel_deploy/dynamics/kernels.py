@@ -35,6 +35,8 @@ import numpy as np
 from numba import njit
 
 from .._numba_cache import announce_compilation
+from ..boxes import contact as contact_of_boxes
+from ..boxes import scratch as box_scratch
 from .pack import EXACT, PENALTY, TREE
 
 # Every kernel module imports this one (collision's through dynamics), so the
@@ -730,6 +732,82 @@ def air_drag(P, air, R, p, w, vo, f):
     return power
 
 
+#: Depth (m) over which a panel contact comes in: below it the spring force
+#: is k d^2 / (2 D) and the damping c d / D, so that the push and its
+#: stiffness grow from zero at first touch. A contact in full at once makes
+#: the push (and the Jacobian) jump, and a step across it must shrink to
+#: where the jump no longer matters. Far below the depth of a press that
+#: carries more than a fraction of a newton (1 um per N at k_p = 1e6 N/m).
+CONTACT_RAMP = 1e-5
+
+
+@njit(cache=True)
+def _contact_law(depth, speed, k, c):
+    """One contact point at depth > 0 (m) approaching at speed (m/s), see
+    ``CONTACT_RAMP``: its push (N, never a pull), the spring's share of it
+    (N) and energy (J), and d spring / d depth (N/m) and the damping (N s/m)
+    at that depth; k and c are the full stiffness (N/m) and damping (N s/m)."""
+    D = CONTACT_RAMP
+    if depth < D:
+        spring, energy, stiffness, damping = (0.5 * k * depth * depth / D, k * depth ** 3 / (6.0 * D),
+                                              k * depth / D, c * depth / D)
+    else:
+        spring, stiffness, damping = k * (depth - 0.5 * D), k, c
+        energy = k * (0.5 * depth * depth - 0.5 * D * depth + D * D / 6.0)
+    return max(0.0, spring + damping * speed), spring, energy, stiffness, damping
+
+
+@njit(cache=True)
+def _pair_points(P, contact, r, R, p, work, reach):
+    """Contact points of pair r of ``P.contact`` (:func:`boxes.contact`): their
+    number (those deeper than -reach, m) and the normal from the pair's first
+    body towards its second; points and depths are left in work."""
+    a, b = int(contact[r, 0]), int(contact[r, 1])
+    return contact_of_boxes(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], work, reach)
+
+
+@njit(cache=True)
+def panel_contacts(P, contact, R, p, w, vo, f):
+    """Subtract the panel-contact wrenches from f (n + 1, 6), the bias wrenches
+    about the ground origin; returns the contact energy (J) and the power its
+    dampers dissipate (W).
+
+    Per contact point of a pair of ``P.contact`` (:mod:`panel_deploy.contacts`,
+    :func:`panel_deploy.boxes.contact`) at depth d > 0, approaching at s (the
+    normal speed of the pair's first body's point there relative to the
+    second's), a push ``max(0, k d + c s)`` along the normal on the two
+    bodies, k and c its share of k_p and c_p: a spring and damper that never
+    pulls (one that pulled would glue parting panels together), both coming
+    in over the first ``CONTACT_RAMP`` of depth (:func:`_contact_law`). The
+    spring stores its energy; the rest of the push's work, (push - spring) s
+    >= 0, is dissipated (s is d's rate up to the motion of the point).
+    ``contact`` is ``P.contact``, passed apart so numba prunes this for None.
+    """
+    if contact is None:
+        return 0.0, 0.0
+    energy = 0.0
+    power = 0.0
+    work = box_scratch()
+    points, depths = work[-2], work[-1]
+    for r in range(contact.shape[0]):
+        count, normal = _pair_points(P, contact, r, R, p, work, 0.0)
+        a, b = int(contact[r, 0]), int(contact[r, 1])
+        k, c = contact[r, 8], contact[r, 9]
+        for q in range(count):
+            depth = depths[q]
+            if depth <= 0.0:
+                continue
+            x = (points[q, 0], points[q, 1], points[q, 2])
+            speed = _dot(normal, _sub(_point_velocity(w, vo, a, x), _point_velocity(w, vo, b, x)))
+            push, spring, e, _, _ = _contact_law(depth, speed, k, c)
+            energy += e
+            power += (push - spring) * speed
+
+            _add_wrench(f, a, ZERO3, _scale(normal, push), x)
+            _add_wrench(f, b, ZERO3, _scale(normal, -push), x)
+    return energy, power
+
+
 @njit(cache=True)
 def mass_and_bias(P, theta, omega):
     """Mass matrix, generalised force and everything the energy needs.
@@ -778,6 +856,9 @@ def mass_and_bias(P, theta, omega):
         _put(f, i, _add(_get(f, i), fw))
         _put(f, i, _add(_get(f, i, 3), fv), 3)
     dissipation += air_drag(P, P.air, R, p, w, vo, f)
+    e, pw = panel_contacts(P, P.contact, R, p, w, vo, f)
+    spring += e
+    dissipation += pw
     Q = np.empty(n)
     for i in range(n - 1, -1, -1):
         tau, e, pw = hinge_law(theta[i], omega[i], P.k[i], P.c[i], P.k_s, P.c_s)
@@ -900,6 +981,33 @@ def _outer_add(out, scale, u):
 
 
 @njit(cache=True)
+def _contact_stiffness(P, contact, R, p, S, Kq, Cq):
+    """Add to Kq, Cq (n, n) the stiffness and damping of the panel contacts
+    pressed now: ``k G^T G``, ``c G^T G`` per contact point at its depth
+    (:func:`_contact_law`), G the row of -d(depth)/d theta there."""
+    if contact is None:
+        return
+    Jp = np.empty((3, P.n))
+    G = np.empty(P.n)
+    work = box_scratch()
+    points, depths = work[-2], work[-1]
+    for r in range(contact.shape[0]):
+        count, normal = _pair_points(P, contact, r, R, p, work, 0.0)
+        for q in range(count):
+            if depths[q] <= 0.0:
+                continue
+            _, _, _, k, c = _contact_law(depths[q], 0.0, contact[r, 8], contact[r, 9])
+            x = (points[q, 0], points[q, 1], points[q, 2])
+            Jp[:] = 0.0
+            _point_jacobian(P, S, int(contact[r, 1]), x, Jp, 0, 1.0)
+            _point_jacobian(P, S, int(contact[r, 0]), x, Jp, 0, -1.0)
+            for col in range(P.n):
+                G[col] = normal[0] * Jp[0, col] + normal[1] * Jp[1, col] + normal[2] * Jp[2, col]
+            _outer_add(Kq, k, G)
+            _outer_add(Cq, c, G)
+
+
+@njit(cache=True)
 def stiff_jacobian(P, y):
     """The stiff linear part of ``A = d qdd / d theta`` and ``B = d qdd / d omega``, (n, n).
 
@@ -938,6 +1046,7 @@ def stiff_jacobian(P, y):
         contact = contact_mode(th) != 1
         _outer_add(Kq, P.cut_k[j] + (P.k_s if contact else 0.0), G)
         _outer_add(Cq, P.cut_c[j] + (P.c_s if contact else 0.0), G)
+    _contact_stiffness(P, P.contact, R, p, S, Kq, Cq)
     if P.method != TREE:
         c, J, _ = closure_jacobian(P, R, p, w, vo, S, np.zeros((0, 6)))
     else:

@@ -65,6 +65,12 @@ class Packed(NamedTuple):
         velocity. None when the model has no air: numba then compiles the
         kernels without the drag code (a flag or an empty array kept it, and
         cost a run without air 5-9 % in speed).
+    contact : (q, 10) float, or None without panel contacts
+        One row per pair of :attr:`Model.contact_pairs`: its bodies (kernel
+        indices, as floats), their half edges (m, 3 + 3), and the stiffness
+        (N/m) and damping (N s/m) of each of its contact points, a quarter of
+        k_p and c_p (a face pressed evenly has four). None, like ``air``, so
+        that numba leaves the contact code out.
     """
 
     n: int
@@ -98,6 +104,7 @@ class Packed(NamedTuple):
     gravity: np.ndarray
     has_gravity: bool
     air: np.ndarray | None
+    contact: np.ndarray | None
 
 
 def _normal(axis):
@@ -105,6 +112,17 @@ def _normal(axis):
     trial = np.array([0.0, 0.0, 1.0]) if abs(axis[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
     e = trial - axis * (axis @ trial)
     return e / np.linalg.norm(e)
+
+
+#: Contact points of a face pressed flat on another: its k_p and c_p are shared by them.
+FACE_POINTS = 4
+
+
+def _contact_rows(model: Model, index: dict) -> np.ndarray | None:
+    """Packed.contact of ``model``."""
+    rows = [[index[a], index[b], *(0.5 * model.bodies[a].size), *(0.5 * model.bodies[b].size),
+             model.k_p / FACE_POINTS, model.c_p / FACE_POINTS] for a, b in model.contact_pairs]
+    return np.array(rows, dtype=float) if rows else None
 
 
 def pack(model: Model) -> Packed:
@@ -157,4 +175,5 @@ def pack(model: Model) -> Packed:
         has_gravity=bool(np.any(gravity != 0.0)),
         air=np.array([[*(0.5 * model.bodies[b].size[:2]), drag] for b in body_of],
                      dtype=float).reshape(n, 3) if drag > 0.0 else None,
+        contact=_contact_rows(model, index),
     )

@@ -12,7 +12,7 @@ The MJCF model is the same multibody system, written so that MuJoCo's
   given explicitly by ``<inertial fullinertia=...>`` (``Body.inertia`` about
   the centroid, body axes); geoms carry no mass and have
   ``contype = conaffinity = 0``: panel collisions are detected separately,
-  as in the paper.
+  as in the paper, and only the panel contacts below act.
 * Tree hinges carry the paper's Eq. (2) spring and damper through MuJoCo's
   joint ``stiffness = k`` with ``springref = 0`` and ``damping = c``
   (``armature = frictionloss = 0``).
@@ -26,6 +26,16 @@ The MJCF model is the same multibody system, written so that MuJoCo's
   damping as the paper's for the isolated row at the start, approximate once
   the inertia changes. MuJoCo limits only push, while the paper's damper
   also pulls while a hinge leaves the limit.
+* Panel contacts (``Model.contact_pairs``, the unhinged panels touching in
+  the stowed stacks) are frictionless (``condim="1"``) contact pairs of the
+  two box geoms, with (k_p, c_p) mapped to direct stiffness and damping by
+  the same rule, the inverse effective mass of the relative motion along
+  the contact normal at the middle of the touching region, stowed state.
+  MuJoCo's box-box collider makes up to 8 contact points of a pair, each
+  with that solref, where ours pushes at one point (:mod:`panel_deploy.boxes`):
+  the two agree on where a contact acts and when it starts, less on how
+  deep a press goes. Pairs not listed there (and every other geom pair)
+  do not collide in MuJoCo, as in our model.
 * A cut hinge closes its loop with two ``<connect>`` equalities, at M and at
   N, between sites on the two bodies. They make six rows for the paper's five
   penalty springs (Eq. 5): the sixth, along the hinge axis, repeats the one
@@ -68,6 +78,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from ..errors import ModelError
+from ..contacts import TOUCHING, touching_region
 from ..kinematics import forward_kinematics
 from ..model import Model
 
@@ -163,7 +174,8 @@ def solref_parameters(model: Model) -> dict:
 
     Returns a dict: ``"limit"`` -> (n_coords, 2) array of (K, B) per coordinate
     in 1/s^2 and 1/s; ``("connect", h, "M")`` / ``("connect", h, "N")`` ->
-    (K, B) for cut hinge ``h``. All evaluated at the stowed state.
+    (K, B) for cut hinge ``h``; ``("contact", a, b)`` -> (K, B) of the panel
+    contact of bodies a and b. All evaluated at the stowed state.
     """
     theta = model.theta_stowed
     M, Jv, Jw = mass_matrix(model, theta)
@@ -177,7 +189,21 @@ def solref_parameters(model: Model) -> dict:
                  - _point_jacobian(model, theta, Jv, Jw, h.body_a, point))
             a = float(np.trace(J @ Minv @ J.T)) / 3.0
             out[("connect", h_index, end)] = (a * k, a * c)
+    R, p = forward_kinematics(model, theta)
+    for a, b in model.contact_pairs:
+        lo, hi = touching_region(model, R, p, a, b)
+        point = 0.5 * (lo + hi)
+        J = (_point_jacobian(model, theta, Jv, Jw, b, _flat(model, R, p, b, point))
+             - _point_jacobian(model, theta, Jv, Jw, a, _flat(model, R, p, a, point)))
+        normals = np.eye(3)[hi - lo <= TOUCHING]
+        inverse_mass = float(np.mean([n @ J @ Minv @ J.T @ n for n in normals]))
+        out[("contact", a, b)] = (inverse_mass * model.k_p, inverse_mass * model.c_p)
     return out
+
+
+def _flat(model: Model, R, p, body: int, x):
+    """Where body's material point at x (poses R, p) sits in the flat state, m."""
+    return model.bodies[body].flat_position + R[body].T @ (x - p[body])
 
 
 def _axis_quat(axis, angle):
@@ -295,6 +321,13 @@ def _document(model: Model, timestep: float, integrator: str) -> str:
                          f'gear="0 0 0 {_vec(h.axis)}" gainprm="0" biastype="affine" '
                          f'biasprm="{_f(-0.5 * math.pi * h.k_hinge)} {_f(-h.k_hinge)} {_f(-h.c_hinge)}"/>')
         lines.append("  </actuator>")
+    if model.contact_pairs:
+        lines.append("  <contact>")
+        for a, b in model.contact_pairs:
+            K, B = solref[("contact", a, b)]
+            lines.append(f"    <pair geom1={_name(model.bodies[a].name)} geom2={_name(model.bodies[b].name)} "
+                         f'condim="1" solref="{_f(-K)} {_f(-B)}" solimp={imp}/>')
+        lines.append("  </contact>")
     qpos = np.empty(model.n_coords)
     qpos[qpos_index(model)] = model.theta_stowed
     lines.append("  <keyframe>")

@@ -1,0 +1,310 @@
+"""Boxes: the panels' geometry shared by the contact model and the collision check.
+
+Every body is one box: rotation R (3, 3), centre c (3,) and half edges h (3,),
+ground frame, m. The separating-axis test here gives the collision check its
+exact penetration depths (:mod:`panel_deploy.collision.geometry`) and the
+panel contacts of the dynamics their depth and normal; :func:`contact`
+adds where the contact acts. Plain numba functions, callable from both.
+"""
+
+from __future__ import annotations
+
+import math
+from itertools import product
+
+import numpy as np
+from numba import njit
+
+#: Corner signs of a box, in the order of :func:`corners`.
+SIGNS = np.array(list(product((-1.0, 1.0), repeat=3)))
+#: A box's support feature along a contact normal (a vertex, an edge or a face)
+#: holds its corners within this fraction of its smallest half edge of the
+#: extreme: so faces tilted by up to about FEATURE * thickness / length (5 mrad
+#: for the paper's 100 x 100 x 5 mm panels) still press as faces.
+FEATURE = 0.1
+
+
+@njit(cache=True)
+def corners(R, c, h):
+    """The 8 corners (8, 3) of a box, m, in the order of ``SIGNS``."""
+    return corners_into(R, c, h, np.empty((8, 3)))
+
+
+@njit(cache=True)
+def corners_into(R, c, h, out):
+    """:func:`corners`, written to out (8, 3) and returned."""
+    for k in range(8):
+        for m in range(3):
+            out[k, m] = c[m] + (SIGNS[k, 0] * h[0] * R[m, 0] + SIGNS[k, 1] * h[1] * R[m, 1]
+                                + SIGNS[k, 2] * h[2] * R[m, 2])
+    return out
+
+
+@njit(cache=True)
+def radius(R, h, n):
+    """Half-extent (m) along the unit vector n (3,) of a box of rotation R (3, 3) and half edges h (3,)."""
+    r = 0.0
+    for k in range(3):
+        r += abs(n[0] * R[0, k] + n[1] * R[1, k] + n[2] * R[2, k]) * h[k]
+    return r
+
+
+@njit(cache=True)
+def separation(Ra, ca, ha, Rb, cb, hb, n):
+    """Gap (m) between the projections on the unit vector ``n`` (3,) of the boxes
+    (R (3, 3), centre c (3,), half edges h (3,), ground frame, m) a and b."""
+    along = n[0] * (cb[0] - ca[0]) + n[1] * (cb[1] - ca[1]) + n[2] * (cb[2] - ca[2])
+    return along - radius(Ra, ha, n) - radius(Rb, hb, n)
+
+
+@njit(cache=True)
+def least_overlap(Ra, ca, ha, Rb, cb, hb):
+    """Separating-axis test of boxes a and b (given as in :func:`separation`).
+
+    Over the 15 candidate axes (the 3 + 3 face normals, then the 9 edge cross
+    products a_i x b_j, in that order; near-parallel edge pairs skipped), the
+    axis of least overlap: returns ``(overlap, axis, along)`` with the overlap
+    (m, < 0 if that axis separates the boxes), the unit axis (a 3-tuple) and
+    the centre offset ``(c_b - c_a) . axis`` (m) that gives its direction. The
+    first of equal overlaps wins. No allocation: the contact model calls it
+    in every evaluation of the dynamics.
+    """
+    best = np.inf
+    axis = (0.0, 0.0, 0.0)
+    along_best = 0.0
+    for k in range(15):
+        if k < 3:
+            u0, u1, u2 = Ra[0, k], Ra[1, k], Ra[2, k]
+        elif k < 6:
+            u0, u1, u2 = Rb[0, k - 3], Rb[1, k - 3], Rb[2, k - 3]
+        else:
+            i, j = (k - 6) // 3, (k - 6) % 3
+            u0 = Ra[1, i] * Rb[2, j] - Ra[2, i] * Rb[1, j]
+            u1 = Ra[2, i] * Rb[0, j] - Ra[0, i] * Rb[2, j]
+            u2 = Ra[0, i] * Rb[1, j] - Ra[1, i] * Rb[0, j]
+        norm = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+        if norm <= 1e-9:
+            continue
+        u0, u1, u2 = u0 / norm, u1 / norm, u2 / norm
+        along = u0 * (cb[0] - ca[0]) + u1 * (cb[1] - ca[1]) + u2 * (cb[2] - ca[2])
+        ra = rb = 0.0
+        for m in range(3):
+            ra += abs(u0 * Ra[0, m] + u1 * Ra[1, m] + u2 * Ra[2, m]) * ha[m]
+            rb += abs(u0 * Rb[0, m] + u1 * Rb[1, m] + u2 * Rb[2, m]) * hb[m]
+        overlap = ra + rb - abs(along)
+        if overlap < best:
+            best = overlap
+            axis = (u0, u1, u2)
+            along_best = along
+    return best, axis, along_best
+
+
+@njit(cache=True)
+def bounding_gap(ca, ha, cb, hb):
+    """A lower bound (m) on the distance of boxes a and b from their
+    circumscribed spheres: the contact model's cheap test before the
+    separating axes."""
+    d = math.sqrt((cb[0] - ca[0]) ** 2 + (cb[1] - ca[1]) ** 2 + (cb[2] - ca[2]) ** 2)
+    return d - math.sqrt(ha[0] ** 2 + ha[1] ** 2 + ha[2] ** 2) - math.sqrt(hb[0] ** 2 + hb[1] ** 2 + hb[2] ** 2)
+
+
+@njit(cache=True)
+def _feature(V, n, sign, eps, out):
+    """Write to out the corners of V (8, 3) within eps of the largest sign * (n . v);
+    returns their number and that extreme, m."""
+    top = -np.inf
+    for k in range(8):
+        top = max(top, sign * (n[0] * V[k, 0] + n[1] * V[k, 1] + n[2] * V[k, 2]))
+    m = 0
+    for k in range(8):
+        if sign * (n[0] * V[k, 0] + n[1] * V[k, 1] + n[2] * V[k, 2]) >= top - eps:
+            out[m, :] = V[k]
+            m += 1
+    return m, sign * top
+
+
+@njit(cache=True)
+def _plane(F, m, n, e1, e2, out, angle):
+    """The m points F in the contact frame, written to out (m, 3): coordinates
+    along e1, e2, then the height along n; ordered counter-clockwise around
+    their mean (a convex polygon when m >= 3). angle (>= m,) is scratch."""
+    cx = cy = 0.0
+    for k in range(m):
+        out[k, 0] = F[k, 0] * e1[0] + F[k, 1] * e1[1] + F[k, 2] * e1[2]
+        out[k, 1] = F[k, 0] * e2[0] + F[k, 1] * e2[1] + F[k, 2] * e2[2]
+        out[k, 2] = F[k, 0] * n[0] + F[k, 1] * n[1] + F[k, 2] * n[2]
+        cx += out[k, 0] / m
+        cy += out[k, 1] / m
+    for k in range(m):
+        angle[k] = math.atan2(out[k, 1] - cy, out[k, 0] - cx)
+    for k in range(1, m):  # insertion sort: m <= 8
+        j = k
+        while j > 0 and angle[j - 1] > angle[j]:
+            angle[j - 1], angle[j] = angle[j], angle[j - 1]
+            for q in range(3):
+                out[j - 1, q], out[j, q] = out[j, q], out[j - 1, q]
+            j -= 1
+
+
+@njit(cache=True)
+def _covers(P, m, x, y, tol):
+    """Whether the point (x, y) lies in the convex hull of P[:m] (2-d, ordered
+    as :func:`_plane` leaves them), to within tol, m."""
+    if m == 1:
+        return math.hypot(x - P[0, 0], y - P[0, 1]) <= tol
+    edges = 1 if m == 2 else m
+    for k in range(edges):
+        ax, ay = P[k, 0], P[k, 1]
+        bx, by = P[(k + 1) % m, 0], P[(k + 1) % m, 1]
+        length = math.hypot(bx - ax, by - ay)
+        if length == 0.0:
+            continue
+        cross = ((bx - ax) * (y - ay) - (by - ay) * (x - ax)) / length
+        if m == 2:
+            along = ((bx - ax) * (x - ax) + (by - ay) * (y - ay)) / length
+            return abs(cross) <= tol and -tol <= along <= length + tol
+        if cross < -tol:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _height(P, m, x, y):
+    """Height along the normal (m) of the feature P[:m] (ordered by
+    :func:`_plane`) over the point (x, y): its vertex, its edge's line
+    (nearest point), or its face's plane."""
+    if m == 1:
+        return P[0, 2]
+    if m >= 3:
+        ux, uy = P[1, 0] - P[0, 0], P[1, 1] - P[0, 1]
+        vx, vy = P[2, 0] - P[0, 0], P[2, 1] - P[0, 1]
+        det = ux * vy - uy * vx
+        if abs(det) > 1e-12 * (ux * ux + uy * uy + vx * vx + vy * vy):
+            dx, dy = x - P[0, 0], y - P[0, 1]
+            l1 = (dx * vy - dy * vx) / det
+            l2 = (ux * dy - uy * dx) / det
+            return P[0, 2] + l1 * (P[1, 2] - P[0, 2]) + l2 * (P[2, 2] - P[0, 2])
+    # an edge (or a face seen edge on): along the line through its first two points
+    ux, uy = P[1, 0] - P[0, 0], P[1, 1] - P[0, 1]
+    length2 = ux * ux + uy * uy
+    t = 0.0 if length2 == 0.0 else min(1.0, max(0.0, ((x - P[0, 0]) * ux + (y - P[0, 1]) * uy) / length2))
+    return P[0, 2] + t * (P[1, 2] - P[0, 2])
+
+
+@njit(cache=True)
+def _add_point(out, count, x, y, tol):
+    """Append (x, y) to out[:count] unless a point there is within tol of it
+    (a corner on the other's edge is also a crossing) or out is full; the new count."""
+    for k in range(count):
+        if abs(out[k, 0] - x) <= tol and abs(out[k, 1] - y) <= tol:
+            return count
+    if count == out.shape[0]:
+        return count
+    out[count, 0], out[count, 1] = x, y
+    return count + 1
+
+
+@njit(cache=True)
+def _overlap_corners(A, ma, B, mb, tol, out):
+    """Corners of the intersection of the convex hulls of A[:ma] and B[:mb]
+    (2-d, their first two columns), written to out; returns their number:
+    each one's points inside the other and their edges' crossings. Without
+    any (hulls apart by more than tol), the one point half way between the
+    two hulls' means."""
+    count = 0
+    for P, mp, Q, mq in ((A, ma, B, mb), (B, mb, A, ma)):
+        for k in range(mp):
+            if _covers(Q, mq, P[k, 0], P[k, 1], tol):
+                count = _add_point(out, count, P[k, 0], P[k, 1], tol)
+    ea = 0 if ma == 1 else (1 if ma == 2 else ma)
+    eb = 0 if mb == 1 else (1 if mb == 2 else mb)
+    for i in range(ea):
+        px, py = A[i, 0], A[i, 1]
+        rx, ry = A[(i + 1) % ma, 0] - px, A[(i + 1) % ma, 1] - py
+        for j in range(eb):
+            qx, qy = B[j, 0], B[j, 1]
+            wx, wy = B[(j + 1) % mb, 0] - qx, B[(j + 1) % mb, 1] - qy
+            denom = rx * wy - ry * wx
+            if abs(denom) <= 1e-12 * math.hypot(rx, ry) * math.hypot(wx, wy):
+                continue  # parallel: their overlap is in the corners above
+            s = ((qx - px) * wy - (qy - py) * wx) / denom
+            u = ((qx - px) * ry - (qy - py) * rx) / denom
+            if 0.0 <= s <= 1.0 and 0.0 <= u <= 1.0:
+                count = _add_point(out, count, px + s * rx, py + s * ry, tol)
+    if count == 0:
+        out[0, 0] = out[0, 1] = 0.0
+        for P, mp in ((A, ma), (B, mb)):
+            for k in range(mp):
+                out[0, 0] += 0.5 * P[k, 0] / mp
+                out[0, 1] += 0.5 * P[k, 1] / mp
+        count = 1
+    return count
+
+
+#: Most contact points of one pair: 8 corners inside plus 8 edge crossings.
+MAX_POINTS = 16
+
+
+@njit(cache=True)
+def scratch():
+    """The work space :func:`contact` takes, allocated once by its caller;
+    the contact points and their depths are left in its last two arrays."""
+    return (np.empty((8, 3)), np.empty((8, 3)), np.empty((8, 3)), np.empty((8, 3)),
+            np.empty((8, 3)), np.empty((8, 3)), np.empty(8), np.empty((MAX_POINTS, 2)),
+            np.empty((MAX_POINTS, 3)), np.empty(MAX_POINTS))
+
+
+@njit(cache=True)
+def contact(Ra, ca, ha, Rb, cb, hb, work, reach=0.0):
+    """Where and how deep boxes a and b (given as in :func:`separation`) interfere.
+
+    The separating-axis test gives the normal n (from a towards b) of least
+    overlap; each box's support feature along it (a's corners furthest
+    towards b, b's furthest towards a, see ``FEATURE``: a corner, an edge or
+    a face) is projected on the plane normal to n, and the corners of their
+    overlap are the contact points: for faces pressed flat the corners of
+    the overlap, for crossing edges the crossing, for a corner the corner.
+    A point's depth is how far a's feature reaches past b's there, along n,
+    so a tilted face presses deeper at one edge; the point itself is half
+    way between the two.
+
+    Returns ``(count, normal)``: the number of points whose depth exceeds
+    ``-reach`` (m; 0 when the separating-axis test finds the boxes more than
+    ``reach`` apart) and n (a 3-tuple). The points (m) and their depths (m)
+    are ``work[-2][:count]`` and ``work[-1][:count]``; ``work`` is
+    :func:`scratch`.
+    """
+    if bounding_gap(ca, ha, cb, hb) > reach:
+        return 0, (0.0, 0.0, 0.0)
+    depth, axis, along = least_overlap(Ra, ca, ha, Rb, cb, hb)
+    if depth <= -reach:
+        return 0, (0.0, 0.0, 0.0)
+    s = 1.0 if along >= 0.0 else -1.0
+    n = (s * axis[0], s * axis[1], s * axis[2])
+    eps = FEATURE * min(min(ha[0], ha[1], ha[2]), min(hb[0], hb[1], hb[2]))
+    Va, Vb, Fa, Fb, A, B, angle, corners2, points, depths = work
+    ma, _ = _feature(corners_into(Ra, ca, ha, Va), n, 1.0, eps, Fa)
+    mb, _ = _feature(corners_into(Rb, cb, hb, Vb), n, -1.0, eps, Fb)
+    # a unit e1 normal to n, from the frame axis least aligned with it
+    k = 0 if abs(n[0]) <= min(abs(n[1]), abs(n[2])) else (1 if abs(n[1]) <= abs(n[2]) else 2)
+    t = (1.0 - n[k] * n[0] if k == 0 else -n[k] * n[0],
+         1.0 - n[k] * n[1] if k == 1 else -n[k] * n[1],
+         1.0 - n[k] * n[2] if k == 2 else -n[k] * n[2])
+    norm = math.sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2])
+    e1 = (t[0] / norm, t[1] / norm, t[2] / norm)
+    e2 = (n[1] * e1[2] - n[2] * e1[1], n[2] * e1[0] - n[0] * e1[2], n[0] * e1[1] - n[1] * e1[0])
+    _plane(Fa, ma, n, e1, e2, A, angle)
+    _plane(Fb, mb, n, e1, e2, B, angle)
+    found = _overlap_corners(A, ma, B, mb, eps, corners2)
+    count = 0
+    for q in range(found):
+        x, y = corners2[q, 0], corners2[q, 1]
+        top, bottom = _height(A, ma, x, y), _height(B, mb, x, y)
+        if top - bottom <= -reach:
+            continue
+        z = 0.5 * (top + bottom)
+        for m in range(3):
+            points[count, m] = x * e1[m] + y * e2[m] + z * n[m]
+        depths[count] = top - bottom
+        count += 1
+    return count, n

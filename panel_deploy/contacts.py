@@ -1,0 +1,85 @@
+"""Panels that touch in the stowed stacks, which get a contact between them.
+
+In the stowed package every panel lies on the one below it, and the two
+stacks stand side by side, so many panels that share no hinge touch: face on
+face between layers, side on side within a layer, edge on edge across the
+stacks. When the springs release the package these panels push on each
+other; without a contact between them the dynamics let them pass through
+each other (on 6 x 6 and larger arrays every first packing circuit did,
+within 0.02-0.06 s). :func:`stowed_contacts` finds those pairs; their
+contact (compliant, normal, one point per pair where their boxes overlap)
+is :func:`panel_deploy.dynamics.kernels.panel_contacts`.
+
+The rule that separates pressing from collision (see
+:mod:`panel_deploy.collision.monitor`): a collision is interference deeper
+than ``collision.tolerance`` (0.1 mm by default). The contact's stiffness
+``contact.k_p`` is chosen so that pressing stays far within it (1e6 N/m: 1 um
+per newton), while an impact at the speeds of a deployment still goes
+deeper (a 0.02 kg panel at 1 m/s: about 0.14 mm), so a collision is an
+impact the model could not stop within the tolerance. Only pairs that touch
+in the stowed state get a contact: elsewhere the panels of a deployment
+approach each other only in an impact, which the collision check is there
+to find, and contact terms for them would cost every step (the mission:
+leave out what a scene does not need).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .kinematics import forward_kinematics
+from .model import Model
+
+#: Boxes this close (m) in the stowed state touch: the packing stacks panels
+#: exactly one thickness apart, so only rounding separates touching faces.
+TOUCHING = 1e-9
+
+
+def touching_region(model: Model, R, p, a: int, b: int):
+    """Where bodies a and b touch in poses (R, p) that keep every body axis
+    along a frame axis (stowed, flat: each body is then its own axis-aligned
+    box): the box (lo, hi), m, with ``hi - lo`` zero along the directions of
+    contact; None if they are apart or interpenetrate."""
+    lo, hi = [], []
+    for i in (a, b):
+        half = np.abs(R[i]) @ (0.5 * model.bodies[i].size)
+        lo.append(p[i] - half)
+        hi.append(p[i] + half)
+    low, high = np.maximum(lo[0], lo[1]), np.minimum(hi[0], hi[1])
+    gap = high - low
+    if np.any(gap < -TOUCHING) or not np.any(gap <= TOUCHING):
+        return None
+    return low, np.maximum(high, low)
+
+
+def stowed_contacts(model: Model, pairs=None) -> tuple:
+    """The body pairs of ``model`` that touch in its stowed stacks.
+
+    Parameters
+    ----------
+    model : Model
+    pairs : iterable of (int, int), optional
+        Body pairs to look at; by default ``model.collision_pairs`` (the
+        unhinged ones: a hinged pair's contact at theta = 0 or pi is the
+        hinge's own, Eq. 3-4).
+
+    Returns
+    -------
+    tuple of (int, int)
+        The pairs that touch at ``model.theta_stowed`` (none for a design
+        whose stowed panels are not all along the frame axes).
+    """
+    R, p = forward_kinematics(model, model.theta_stowed)
+    if not np.allclose(np.abs(R), np.round(np.abs(R)), atol=1e-9):
+        return ()
+    return tuple((int(a), int(b)) for a, b in (model.collision_pairs if pairs is None else pairs)
+                 if touching_region(model, R, p, a, b) is not None)
+
+
+def with_panel_contacts(model: Model, k_p: float, c_p: float, pairs=None) -> Model:
+    """``model`` with the contacts of its stowed stacks (:func:`stowed_contacts`),
+    stiffness k_p (N/m) and damping c_p (N s/m)."""
+    return replace(model, contact_pairs=stowed_contacts(model, pairs), k_p=float(k_p),
+                   c_p=float(c_p))

@@ -1,0 +1,172 @@
+"""Panel-to-panel contact: where it acts (boxes.contact), which pairs get it
+(contacts), the force law against a closed form, and the stacks it holds."""
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from panel_deploy.boxes import contact, scratch
+from panel_deploy.build import build_model
+from panel_deploy.collision import check_trajectory
+from panel_deploy.collision.geometry import box_signed_distance
+from panel_deploy.contacts import stowed_contacts, with_panel_contacts
+from panel_deploy.dynamics import kernels, simulate
+from panel_deploy.dynamics.pack import FACE_POINTS, pack
+from panel_deploy.kinematics import forward_kinematics
+from panel_deploy.model import Body, Hinge, Model, State, box_inertia
+from panel_deploy.scene import SimulationSection, load_scene
+
+ROOT = Path(__file__).resolve().parent.parent
+PAPER = ROOT / "config" / "scenes" / "paper_4x4.yaml"
+HALF = np.array([0.05, 0.05, 0.0025])
+
+
+def points_of(Ra, ca, ha, Rb, cb, hb):
+    work = scratch()
+    count, normal = contact(Ra, np.asarray(ca, float), ha, Rb, np.asarray(cb, float), hb, work)
+    order = np.lexsort(work[-2][:count].T[::-1])
+    return count, np.array(normal), work[-2][:count][order], work[-1][:count][order]
+
+
+def test_faces_pressed_flat_touch_at_the_corners_of_their_overlap():
+    depth = 1e-4
+    count, n, points, depths = points_of(np.eye(3), (0, 0, 0), HALF, np.eye(3),
+                                         (0.03, 0.0, 2 * HALF[2] - depth), HALF)
+    assert count == 4
+    np.testing.assert_allclose(n, [0, 0, 1])
+    np.testing.assert_allclose(depths, depth, rtol=1e-9)
+    # the overlap of the two faces is x in [-0.02, 0.05], y in [-0.05, 0.05], on the mid plane
+    np.testing.assert_allclose(points, [[-0.02, -0.05, HALF[2] - depth / 2], [-0.02, 0.05, HALF[2] - depth / 2],
+                                        [0.05, -0.05, HALF[2] - depth / 2], [0.05, 0.05, HALF[2] - depth / 2]],
+                               atol=1e-12)
+
+
+def test_a_tilted_face_presses_deeper_at_its_lower_edge():
+    tilt = 1e-3  # rad about y, below the FEATURE tilt: still a face
+    Rb = Rotation.from_rotvec([0, tilt, 0]).as_matrix()
+    cb = np.array([0.0, 0.0, 2 * HALF[2] - 1e-4])
+    count, n, points, depths = points_of(np.eye(3), (0, 0, 0), HALF, Rb, cb, HALF)
+    assert count == 4
+    # b's bottom face is the plane through cb - h_z Rb e_z; its height over (x, y)
+    normal_b, point_b = Rb[:, 2], cb - HALF[2] * Rb[:, 2]
+    for x, depth in zip(points, depths):
+        height_b = point_b[2] - (normal_b[0] * (x[0] - point_b[0]) + normal_b[1] * (x[1] - point_b[1])) / normal_b[2]
+        assert depth == pytest.approx(HALF[2] - height_b, rel=1e-6, abs=1e-12)
+    assert depths.max() - depths.min() == pytest.approx(2 * HALF[0] * math.tan(tilt), rel=1e-3)
+
+
+def test_sides_crossing_corners_and_apart():
+    # side by side, the half widths overlapping by 0.2 mm along y: four points on the side faces
+    count, n, points, depths = points_of(np.eye(3), (0, 0, 0), HALF, np.eye(3), (0.05, 0.0998, 0), HALF)
+    assert count == 4
+    np.testing.assert_allclose(n, [0, 1, 0])
+    np.testing.assert_allclose(depths, 2e-4, rtol=1e-9)
+    np.testing.assert_allclose(sorted(set(points[:, 0].round(12))), [0.0, 0.05])
+    # two beams crossing at right angles, one on the other: the corners of the crossing square
+    beam = np.array([0.05, 0.005, 0.005])
+    Rz = Rotation.from_rotvec([0, 0, math.pi / 2]).as_matrix()
+    count, n, points, depths = points_of(np.eye(3), (0, 0, 0), beam, Rz, (0.0, 0.0, 0.0099), beam)
+    assert count == 4
+    np.testing.assert_allclose(np.abs(points[:, :2]), 0.005, atol=1e-12)
+    np.testing.assert_allclose(depths, 1e-4, rtol=1e-9)
+    # a corner of a box turned about two axes, pushed into a face: one point
+    Rc = Rotation.from_rotvec([0.3, 0.4, 0.0]).as_matrix()
+    lowest = min((Rc @ (s * HALF))[2] for s in np.array(np.meshgrid(*[[-1, 1]] * 3)).T.reshape(-1, 3))
+    count, n, points, depths = points_of(np.eye(3), (0, 0, 0), HALF, Rc, (0.0, 0.0, HALF[2] - lowest - 1e-4),
+                                         HALF)
+    assert count == 1 and depths[0] == pytest.approx(1e-4, rel=1e-6)
+    assert points_of(np.eye(3), (0, 0, 0), HALF, np.eye(3), (0, 0, 0.006), HALF)[0] == 0
+
+
+def paper_model(*sets):
+    return build_model(load_scene(PAPER, ["contact.panels=true", *sets]))
+
+
+def test_the_stowed_pairs_are_the_unhinged_pairs_that_touch():
+    model = paper_model()
+    R, p = forward_kinematics(model, model.theta_stowed)
+    touching = {(a, b) for a, b in model.collision_pairs
+                if abs(box_signed_distance(R[a], p[a], model.bodies[a].size / 2,
+                                           R[b], p[b], model.bodies[b].size / 2)) <= 1e-9}
+    assert set(model.contact_pairs) == touching and len(touching) == 10
+    assert stowed_contacts(model) == model.contact_pairs
+    assert paper_model("contact.panels=false").contact_pairs == ()
+    assert pack(paper_model("contact.panels=false")).contact is None
+
+
+def resting_panel(k_p, c_p, lever):
+    """Panel b lies on the ground panel g, on a hinge ``lever`` m from its centre
+    (spring-free, no stop), under gravity normal to the faces."""
+    size = 2 * HALF
+    g = Body("g", ((1, 1),), size, 0.02, box_inertia(0.02, size), np.zeros(3))
+    b = Body("b", ((1, 2),), size, 0.02, box_inertia(0.02, size), np.array([0.0, 0.0, size[2]]))
+    hinge = Hinge("h", 0, 1, np.array([-lever, 0.0, size[2]]), np.array([0.0, 1.0, 0.0]), size[1],
+                  "top", 0.0, 0.0, 0.0, ())
+    model = Model.build([g, b], [hinge], 0, gravity=(0.0, 0.0, -9.81))
+    return with_panel_contacts(model, k_p, c_p, pairs=[(0, 1)])
+
+
+def test_a_panel_resting_on_another_presses_in_as_the_law_says():
+    """Static closed form: the four corners of the face, at levers D -/+ a/2
+    from the hinge, press in by phi times their lever, each with the push
+    (k_p / 4)(d - D_r / 2) of the law past its ramp D_r; their moment about
+    the hinge carries the panel's weight at lever D."""
+    k_p, lever, m, g = 1e4, 1.0, 0.02, 9.81
+    model = resting_panel(k_p, 100.0, lever)
+    settings = SimulationSection(t_end=0.4, samples=5, method="compiled", rtol=1e-8, atol=1e-12)
+    result = simulate(model, settings)
+    assert result.success, result.message
+    ramp, k = kernels.CONTACT_RAMP, k_p / FACE_POINTS
+    levers = np.array([lever - HALF[0], lever + HALF[0]])
+    # 2 corners at each lever: sum 2 k (phi L - ramp / 2) L = m g lever
+    phi = (m * g * lever / (2 * k) + ramp / 2 * levers.sum()) / (levers ** 2).sum()
+    assert phi * levers.min() > ramp  # every corner past the ramp: the closed form holds
+    assert result.theta[-1, 0] == pytest.approx(phi, rel=1e-4)
+    assert abs(result.omega[-1, 0]) < 1e-6
+
+
+def test_a_panel_dropped_on_another_bounces_back_with_its_energy():
+    """Without damping the contact stores and returns the fall's energy: the
+    panel lifts off again, and the energy balance holds."""
+    model = resting_panel(1e5, 0.0, 0.5)
+    settings = SimulationSection(t_end=0.08, samples=801, method="compiled", rtol=1e-9, atol=1e-13)
+    state = State.stowed(model)
+    state.theta[:] = -2e-3  # lifted 1 mm at the centre
+    result = simulate(model, settings, state)
+    assert result.success, result.message
+    theta = result.theta[:, 0]
+    touched = np.flatnonzero(theta > 0.0)
+    assert touched.size  # it reached the other panel
+    assert theta[touched[0]:].min() < -0.99 * 2e-3  # and came back up as high
+    total = sum(result.energy[k] for k in ("kinetic", "spring", "gravity", "dissipated"))
+    assert np.ptp(total) < 1e-4 * total[0]
+    assert result.energy["spring"].max() > 0.1 * total[0]  # the contact held the energy at a sample
+
+
+@pytest.fixture(scope="module")
+def six_by_six():
+    sys.path.insert(0, str(ROOT / "bench"))
+    from bench_scaling import first_packing
+
+    n = first_packing(6, 6)
+    sets = ["array.rows=6", "array.cols=6", f"fold.circuit={n}", "fold.ground=null",
+            "simulation.t_end=0.08", "simulation.samples=17"]
+    return {on: load_scene(PAPER, sets + [f"contact.panels={on}"]) for on in ("true", "false")}
+
+
+def test_the_stacks_of_a_6x6_array_no_longer_pass_through_each_other(six_by_six):
+    """Without contact two panels side by side in one layer (r3c6, r4c2) press
+    into each other from 0.04 s; with it they push each other aside."""
+    reports = {}
+    for on, scene in six_by_six.items():
+        model = build_model(scene)
+        result = simulate(model, scene.simulation)
+        assert result.success, result.message
+        reports[on] = check_trajectory(model, result)
+    without = reports["false"].first_collision
+    assert without is not None and set(without.names) == {"r3c6", "r4c2"} and without.t < 0.045
+    assert not reports["true"].collided, reports["true"].to_text()

@@ -12,6 +12,7 @@ import yaml
 from panel_deploy.build import build_model, scene_design
 from panel_deploy.cli import main
 from panel_deploy.collision import CollisionSettings, check_trajectory
+from panel_deploy.configure import load_array
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_angles
 from panel_deploy.errors import SceneError
@@ -116,6 +117,15 @@ def test_auto_resolves_to_the_top_ranked_circuit_once_per_scene(soft, ranked, mo
     assert resolve_circuit(again).fold.circuit == index
     assert build_model(again).n_bodies == build_model(chosen).n_bodies
     assert resolve_circuit(chosen) is chosen  # a circuit index is left alone
+
+
+def test_the_array_model_publishes_the_circuit_auto_chose(soft, ranked, tmp_path):
+    path = tmp_path / "soft.yaml"
+    path.write_text(yaml.safe_dump(soft.data))
+    scene, model, text = load_array(str(path))
+    published = yaml.safe_load(text)["fold"]
+    assert scene.fold.circuit == published["circuit"] == ranked.best.index
+    assert published["circuit_choice"]["by"] == "ranking"
 
 
 def test_auto_refusals_are_one_line_naming_fold_circuit(soft):

@@ -31,17 +31,19 @@ from ..errors import PanelDeployError, SceneError
 from . import designs
 from .report import short_reason
 
-#: Packing circuits screened unless told otherwise: a screening run costs
-#: 0.07-0.8 s on the paper's 4 x 4 panels (one core, rtol 1e-4), so eight are
-#: a few seconds, and the first packing circuits of a 10 x 10 array are among
-#: its first 150 (found in 5.6 s).
+#: Packing circuits screened unless told otherwise. Measured with the paper's
+#: panels and springs (2 shared cores, other jobs running): 4 x 4 (all 6)
+#: 2.2 s, 5 x 6 4.8 s, 6 x 6 8.9 s, 10 x 10 49 s (its first 8 packing
+#: circuits are among its first 132; 4-7 s each, mostly building the 100-body
+#: model and collision check, the runs colliding by 0.05 s).
 DEFAULT_CANDIDATES = 8
 #: Circuits examined for packing at most while looking for the candidates
 #: (a design costs 1-40 ms, 4 x 4 .. 10 x 10).
 MAX_EXAMINED = 1000
-#: Screening end time, s: long enough for the first collisions of every 4 x 4
-#: to 6 x 6 circuit we screened (0.02-0.5 s at the paper's panels and springs),
-#: short against a full deployment (the paper's array lies flat at ~1.6 s).
+#: Screening end time, s: past the first collisions of the 4 x 4 to 6 x 6
+#: circuits we screened (0.02-0.75 s with the paper's panels and springs, soft
+#: or not), short against a full deployment (the paper's array lies flat at
+#: ~1.6 s). A circuit still unfolding then ranks by how close to flat it came.
 SCREEN_T_END = 1.0
 #: Screening relative tolerance (atol keeps its ratio to rtol): what the
 #: paper scene's stiffness search evaluates at. 1e-3 failed the energy
@@ -269,7 +271,8 @@ def screen_circuit(scene, index: int, settings: ScreeningSettings) -> Screening:
     if not (o.simulated or o.collided) and settings.rtol > sim.rtol:
         # a failure of the loose tolerance (3 x 4 circuit 1 fails the energy
         # balance at 1e-4, and deploys at the paper's 1e-6): once more at the scene's
-        message = f"failed at rtol {settings.rtol:g} ({o.message}); screened at the scene's {sim.rtol:g}"
+        message = (f"failed at rtol {settings.rtol:g} ({o.message}); "
+                   f"screened at the scene's {sim.rtol:g}")
         o = run_deployment(model, replace(settings, rtol=sim.rtol, atol=sim.atol).scene(candidate))
         if not o.simulated:
             message = o.message

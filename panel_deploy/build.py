@@ -33,13 +33,18 @@ def cell_centre(cell, rows, cols, a, b) -> np.ndarray:
 def scene_design(scene: Scene):
     """The fold design of a scene's array, circuit, ground and merges, as
     :func:`panel_deploy.fold.design` makes it (it may not pack, and merges may
-    be refused: the design says why).
+    be refused: the design says why). ``fold.circuit: auto`` is the circuit
+    :func:`panel_deploy.fold.ranking.resolve_circuit` chooses.
 
     Raises
     ------
     SceneError
-        If the circuit, ground or merge list is invalid for the array.
+        If the circuit, ground or merge list is invalid for the array, or
+        ``auto`` finds no circuit.
     """
+    from .fold.ranking import resolve_circuit
+
+    scene = resolve_circuit(scene)
     arr, f = scene.array, scene.fold
     try:
         return fold.design(arr.rows, arr.cols, circuit=f.circuit, ground=f.ground, merge=f.merge)

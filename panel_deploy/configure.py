@@ -187,11 +187,14 @@ def load_array(scene: str, stiffness_file: str = "") -> tuple:
     SceneError, OptimisationError
         The scene or the stiffness file is missing or invalid.
     """
+    from .fold.ranking import resolve_circuit
     from .scene import load_scene, resolve_scene
 
     if not scene:
         raise SceneError("scene", "expected a scene file or the name of a shipped scene")
-    parsed = load_scene(resolve_scene(scene))
+    # fold.circuit: auto resolved here, so that the scene it publishes names the
+    # circuit chosen, and every node builds that one without ranking again
+    parsed = resolve_circuit(load_scene(resolve_scene(scene)))
     model = build_model(parsed)
     if not stiffness_file:
         return parsed, model, scene_yaml(parsed)

@@ -77,5 +77,8 @@ class Progress:
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, exc_type, *exc):
+        # an error ends the work with its own one line: no count line after it
+        # (a drawn bar is closed, and stays on the terminal above the error)
+        if exc_type is None or self._bar is not None:
+            self.close()

@@ -157,6 +157,15 @@ def cell(v, path):
 cell.describe = "[row, col]"
 
 
+def mapping(v, path):
+    if not isinstance(v, dict):
+        raise SceneError(path, f"expected a mapping, got {_type_name(v)} {shown(v)}")
+    return v
+
+
+mapping.describe = "mapping"
+
+
 def cell_list(v, path):
     if not isinstance(v, (list, tuple)):
         raise SceneError(path, f"expected a list of cells [row, col], got {shown(v)}")
@@ -284,12 +293,20 @@ class ArraySection:
 
 @dataclass(frozen=True)
 class FoldSection:
-    circuit: Any = spec(0, one_of(integer(0), cell_list, describe="a circuit index or a list of cells"),
-                        "", "Hamiltonian circuit: index in panel-deploy fold's order, or cells in order")
+    circuit: Any = spec(0, one_of(choice("auto"), integer(0), cell_list,
+                                  describe="auto, a circuit index or a list of cells"),
+                        "", "Hamiltonian circuit: index in panel-deploy fold's order, cells in "
+                            "order, or auto (the best of a screening run of the first packing "
+                            "circuits, panel-deploy fold --rank)")
     ground: Any = spec(None, optional(cell), "", "cell of the ground panel (default: first circuit cell)")
     merge: Any = spec("auto", one_of(choice("auto", "none"), cell_pairs,
                                      describe="auto, none or a list of cell pairs"),
                       "", "merge side-by-side panels: auto, none, or the cell pairs to merge")
+    # what fold.circuit: auto chose and why, written with the index it resolved
+    # to: read by people, never by a computation, so any mapping is accepted
+    circuit_choice: Any = spec(None, optional(mapping), "",
+                               "informational: how fold.circuit: auto chose the circuit "
+                               "(written by the ranking)")
 
 
 @dataclass(frozen=True)
@@ -546,8 +563,8 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
     for key in ("name", "description"):
         if key in data and not isinstance(data[key], str):
             raise SceneError(key, f"expected a string, got {_type_name(data[key])}")
-    if "calibration" in data and not isinstance(data["calibration"], dict):
-        raise SceneError("calibration", f"expected a mapping, got {_type_name(data['calibration'])}")
+    if "calibration" in data:
+        mapping(data["calibration"], "calibration")
     return Scene(**sections, gravity=gravity, name=data.get("name", ""),
                  description=data.get("description", ""), source=source, data=data)
 

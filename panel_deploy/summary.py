@@ -38,6 +38,10 @@ def deployment_text(s: dict) -> str:
              f"max constraint gap {s['max_constraint_gap']:.3g} m"
              + ("" if s["min_closure_sigma"] is None else
                 f"; smallest closure singular value {s['min_closure_sigma']:.2e}")]
+    choice = s.get("circuit_choice")
+    if choice:
+        lines.append(f"circuit {choice['index']}: fold.circuit: auto, chosen by ranking (the "
+                     f"best of {len(choice['screened'])} screened: {choice['outcome']})")
     lines.append("hinges released at (s): "
                  + ", ".join(f"{n} {fmt(t)}" for n, t in s["release_times"].items()))
     if s["locked_hinges"]:

@@ -68,7 +68,8 @@ def test_defaults_and_density():
     ("simulation.flat_tolerance", 0, "simulation.flat_tolerance: expected a number > 0"),
     ("closure.method", "lagrange", "closure.method: expected one of penalty, exact"),
     ("fold.ground", [0, 1], "fold.ground: expected a cell"),
-    ("fold.circuit", "zigzag", "fold.circuit: expected a circuit index or a list of cells"),
+    ("fold.circuit", "zigzag", "fold.circuit: expected auto, a circuit index or a list of cells"),
+    ("fold.circuit_choice", "ranking", "fold.circuit_choice: expected a mapping, got str"),
     ("fold.merge", [[[1, 2]]], "fold.merge[0]: expected a pair of cells"),  # the item named
     ("fold.merge", 3, "fold.merge: expected auto, none or a list of cell pairs"),
     # issue 26: accepted silently before (the same hinge merged twice)

@@ -79,6 +79,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--limit", type=int, help="list at most this many circuits (default 50)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.add_argument("--plot", metavar="FILE.png", help="draw the design and its stacks")
+    s.add_argument("--rank", action="store_true",
+                   help="with --scene: rank the first packing circuits by a screening run of "
+                        "each (what fold.circuit: auto chooses from)")
+    s.add_argument("--candidates", type=int, metavar="N",
+                   help="with --rank: screen at most N packing circuits (default 8)")
     add_set(s)
     s.set_defaults(func=_command("fold", "fold_command"))
 

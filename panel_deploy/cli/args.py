@@ -51,10 +51,11 @@ def alias(parser, flag: str, key: str, **kwargs) -> None:
     parser.add_argument(flag, action=SceneKey, key=key, **kwargs)
 
 
-def scene_of(args, name_attr: str = "scene"):
+def scene_of(args, name_attr: str = "scene", resolve: bool = True):
     """The scene ``args`` name (a file, a shipped scene's name, or an MCAP
     recording: the scene its deployment ran, overrides included), with the
-    ``--set`` items and their aliases applied.
+    ``--set`` items and their aliases applied, and with ``resolve`` its
+    ``fold.circuit: auto`` resolved (:func:`chosen_circuit`).
 
     Raises
     ------
@@ -71,8 +72,9 @@ def scene_of(args, name_attr: str = "scene"):
     try:
         if is_mcap(name):
             from ..record.analysis import recorded_scene
-            return recorded_scene(name, overrides=overrides)[1]
-        return load_scene(resolve_scene(name), overrides)
+            scene = recorded_scene(name, overrides=overrides)[1]
+        else:
+            scene = load_scene(resolve_scene(name), overrides)
     except SceneError as e:
         flag = next((f for key, f in aliases.items()
                      if str(e.path) == f"--set {key}" or str(e.path).startswith(f"--set {key}[")),
@@ -80,3 +82,25 @@ def scene_of(args, name_attr: str = "scene"):
         if flag is None:
             raise
         raise SceneError(flag, e.reason) from None
+    return chosen_circuit(scene) if resolve else scene
+
+
+def chosen_circuit(scene):
+    """``scene`` with ``fold.circuit: auto`` resolved to the best-ranked circuit
+    (:func:`panel_deploy.fold.ranking.resolve_circuit`: a screening run of
+    the first packing circuits, with a progress line), which a note on stderr
+    names; any other scene as it is."""
+    if scene.fold.circuit != "auto":
+        return scene
+    import sys
+
+    from ..fold.ranking import resolve_circuit
+    from ..progress import Progress
+
+    with Progress(None, "fold.circuit: auto", "circuits") as bar:
+        scene = resolve_circuit(scene, progress=lambda _: bar.update())
+    c = scene.fold.circuit_choice
+    print(f"panel-deploy: note: fold.circuit: auto chose circuit {c['index']}, the best-ranked of "
+          f"{len(c['screened'])} screened ({c['outcome']}; panel-deploy fold --rank shows the "
+          "ranking)", file=sys.stderr)
+    return scene

@@ -122,6 +122,15 @@ def _positive_int(args, attr, flag, low=1):
 
 
 def _fold(args):
+    if getattr(args, "rank", False):
+        if args.scene is None:
+            raise SceneError("--rank", "needs --scene: the screening simulates the scene's panels, "
+                                       "hinges and settings (--set array.rows=... resizes it)")
+        if args.plot:
+            raise SceneError("--plot", "not with --rank (plot one circuit: --set fold.circuit=N)")
+        _positive_int(args, "candidates", "--candidates", low=1)
+    elif getattr(args, "candidates", None) is not None:
+        raise SceneError("--candidates", "only with --rank (the circuits it screens)")
     if args.scene is not None:
         given = [flag for attr, flag in (("rows", "--rows"), ("cols", "--cols"),
                                          ("circuit", "--circuit"), ("limit", "--limit"))

@@ -20,10 +20,15 @@ DEFAULT_LIMIT = 50
 def fold_command(args) -> int:
     """Print the design of ``--scene`` or of ``--rows/--cols [--circuit]``, or the
     list of an array's designs; ``--plot`` draws the design (for a list, the
-    first packable one). Exit 0, or 1 if the design asked for does not pack."""
+    first packable one); ``--scene --rank`` ranks the scene's packing circuits
+    (:func:`~panel_deploy.fold.ranking.rank_circuits`). Exit 0, or 1 if the
+    design asked for does not pack (for a ranking: if no circuit was screened)."""
+    if args.scene and args.rank:
+        return _rank(scene_of(args, resolve=False), args)
     if args.scene:
-        d = scene_design(scene_of(args))
-        return _report(d, None, args)
+        scene = scene_of(args)
+        index = scene.fold.circuit if isinstance(scene.fold.circuit, int) else None
+        return _report(scene_design(scene), index, args)
     if args.rows is None or args.cols is None:
         raise SceneError("--rows/--cols", "give --rows and --cols, or --scene FILE")
     rows, cols = args.rows, args.cols
@@ -56,6 +61,17 @@ def _list(rows, cols, limit, args) -> int:
         _plot(plotted, args.plot)
     print(json.dumps(out, indent=1) if args.json else designs_text(out))
     return 0
+
+
+def _rank(scene, args) -> int:
+    from ..fold.ranking import DEFAULT_CANDIDATES, rank_circuits
+
+    arr = scene.array
+    candidates = DEFAULT_CANDIDATES if args.candidates is None else args.candidates
+    with Progress(None, f"rank {arr.rows} x {arr.cols}", "circuits") as bar:
+        ranking = rank_circuits(scene, candidates, progress=lambda _: bar.update())
+    print(json.dumps(ranking.to_dict(), indent=1) if args.json else ranking.text())
+    return 0 if ranking.best is not None else 1
 
 
 def _plot(d, path) -> None:

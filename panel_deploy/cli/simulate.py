@@ -27,6 +27,8 @@ def simulate_command(args) -> int:
         save_trajectory(args.out, result, scene, model)
     summary = deployment_summary(model, result, report, flat_tolerance=scene.simulation.flat_tolerance)
     summary["scene"] = scene.name or scene.source
+    if scene.fold.circuit_choice is not None:
+        summary["circuit_choice"] = scene.fold.circuit_choice
     bad = first_non_finite_value(summary)
     if bad is not None:  # a NaN is never an answer: the run counts as failed
         summary.update(success=False, message=f"non-finite result: {bad} ({summary['message']})")

@@ -186,6 +186,12 @@ def designs_summary(rows: int, cols: int, limit: int = 50, progress=None) -> dic
     }
 
 
+def short_reason(reason: str) -> str:
+    """Why a circuit does not pack, in its first clause (the full reason also
+    counts every branch the search cut)."""
+    return reason.split(";")[0].removeprefix("no two-stack package: ")
+
+
 def designs_text(s: dict) -> str:
     """A human-readable form of :func:`designs_summary`."""
     lines = [f"{s['rows']} x {s['cols']} array: {s['circuits']} Hamiltonian circuits"]
@@ -199,7 +205,7 @@ def designs_text(s: dict) -> str:
         verdict = (
             f"packs; {e['bodies']} bodies, DoF {e['dof_cells']} -> {e['dof_bodies']}"
             if e["packs"]
-            else "does not pack: " + e["reason"].split(";")[0].removeprefix("no two-stack package: ")
+            else "does not pack: " + short_reason(e["reason"])
         )
         lines.append(f"  {e['index']:5d}  {verdict}")
     return "\n".join(lines)

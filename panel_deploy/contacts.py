@@ -37,11 +37,13 @@ from .model import Model
 TOUCHING = 1e-9
 
 
-def touching_region(model: Model, R, p, a: int, b: int):
+def touching_region(model: Model, R, p, a: int, b: int, reach: float = 0.0):
     """Where bodies a and b touch in poses (R, p) that keep every body axis
     along a frame axis (stowed, flat: each body is then its own axis-aligned
     box): the box (lo, hi), m, with ``hi - lo`` zero along the directions of
-    contact; None if they are apart or interpenetrate."""
+    contact; None if they are further apart than ``reach`` (m) or
+    interpenetrate. Boxes apart by at most ``reach`` give the (inverted,
+    ``lo > hi`` along the gap) box between them."""
     lo, hi = [], []
     for i in (a, b):
         half = np.abs(R[i]) @ (0.5 * model.bodies[i].size)
@@ -49,12 +51,12 @@ def touching_region(model: Model, R, p, a: int, b: int):
         hi.append(p[i] + half)
     low, high = np.maximum(lo[0], lo[1]), np.minimum(hi[0], hi[1])
     gap = high - low
-    if np.any(gap < -TOUCHING) or not np.any(gap <= TOUCHING):
+    if np.linalg.norm(np.minimum(gap, 0.0)) > reach + TOUCHING or not np.any(gap <= TOUCHING):
         return None
-    return low, np.maximum(high, low)
+    return low, high
 
 
-def stowed_contacts(model: Model, pairs=None) -> tuple:
+def stowed_contacts(model: Model, pairs=None, reach: float = 0.0) -> tuple:
     """The body pairs of ``model`` that touch in its stowed stacks.
 
     Parameters
@@ -64,6 +66,8 @@ def stowed_contacts(model: Model, pairs=None) -> tuple:
         Body pairs to look at; by default ``model.collision_pairs`` (the
         unhinged ones: a hinged pair's contact at theta = 0 or pi is the
         hinge's own, Eq. 3-4).
+    reach : float
+        m; pairs this far apart count as touching.
 
     Returns
     -------
@@ -75,11 +79,11 @@ def stowed_contacts(model: Model, pairs=None) -> tuple:
     if not np.allclose(np.abs(R), np.round(np.abs(R)), atol=1e-9):
         return ()
     return tuple((int(a), int(b)) for a, b in (model.collision_pairs if pairs is None else pairs)
-                 if touching_region(model, R, p, a, b) is not None)
+                 if touching_region(model, R, p, a, b, reach) is not None)
 
 
-def with_panel_contacts(model: Model, k_p: float, c_p: float, pairs=None) -> Model:
+def with_panel_contacts(model: Model, k_p: float, c_p: float, pairs=None, reach: float = 0.0) -> Model:
     """``model`` with the contacts of its stowed stacks (:func:`stowed_contacts`),
     stiffness k_p (N/m) and damping c_p (N s/m)."""
-    return replace(model, contact_pairs=stowed_contacts(model, pairs), k_p=float(k_p),
+    return replace(model, contact_pairs=stowed_contacts(model, pairs, reach), k_p=float(k_p),
                    c_p=float(c_p))

@@ -333,6 +333,9 @@ class ContactSection:
                       "normal stiffness of one panel-to-panel contact pressed evenly")
     c_p: float = spec(280.0, number(0.0, 1e8, why=_WHY_STIFF), "N s/m",
                       "normal damping of one panel-to-panel contact")
+    reach: Any = spec(None, optional(number(0.0, 100.0)), "m",
+                      "unhinged panels this close in the stowed stacks get a contact "
+                      "(default: two panel thicknesses)")
 
 
 @dataclass(frozen=True)

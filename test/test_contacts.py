@@ -16,6 +16,7 @@ from panel_deploy.collision.geometry import box_signed_distance
 from panel_deploy.contacts import stowed_contacts, with_panel_contacts
 from panel_deploy.dynamics import kernels, simulate
 from panel_deploy.dynamics.pack import FACE_POINTS, pack
+from panel_deploy.export import export_mjcf
 from panel_deploy.kinematics import forward_kinematics
 from panel_deploy.model import Body, Hinge, Model, State, box_inertia
 from panel_deploy.scene import SimulationSection, load_scene
@@ -86,14 +87,19 @@ def paper_model(*sets):
     return build_model(load_scene(PAPER, ["contact.panels=true", *sets]))
 
 
-def test_the_stowed_pairs_are_the_unhinged_pairs_that_touch():
+def test_the_stowed_pairs_are_the_unhinged_pairs_within_reach():
+    """By default the pairs at most two thicknesses apart in the stowed stacks
+    (a panel two layers away), or those that touch with reach 0."""
     model = paper_model()
     R, p = forward_kinematics(model, model.theta_stowed)
-    touching = {(a, b) for a, b in model.collision_pairs
-                if abs(box_signed_distance(R[a], p[a], model.bodies[a].size / 2,
-                                           R[b], p[b], model.bodies[b].size / 2)) <= 1e-9}
-    assert set(model.contact_pairs) == touching and len(touching) == 10
-    assert stowed_contacts(model) == model.contact_pairs
+    distance = {(a, b): box_signed_distance(R[a], p[a], model.bodies[a].size / 2,
+                                            R[b], p[b], model.bodies[b].size / 2)
+                for a, b in model.collision_pairs}
+    t = model.bodies[0].size[2]
+    assert set(model.contact_pairs) == {k for k, d in distance.items() if d <= 2 * t + 1e-9}
+    touching = {k for k, d in distance.items() if abs(d) <= 1e-9}
+    assert len(touching) == 10 and set(paper_model("contact.reach=0").contact_pairs) == touching
+    assert stowed_contacts(model) == paper_model("contact.reach=0").contact_pairs
     assert paper_model("contact.panels=false").contact_pairs == ()
     assert pack(paper_model("contact.panels=false")).contact is None
 
@@ -170,3 +176,37 @@ def test_the_stacks_of_a_6x6_array_no_longer_pass_through_each_other(six_by_six)
     without = reports["false"].first_collision
     assert without is not None and set(without.names) == {"r3c6", "r4c2"} and without.t < 0.045
     assert not reports["true"].collided, reports["true"].to_text()
+
+
+def deepest_interference(model, theta) -> float:
+    """Largest interference (m) of any unhinged pair over the samples theta."""
+    worst = 0.0
+    for row in theta:
+        R, p = forward_kinematics(model, row)
+        for a, b in model.collision_pairs:
+            worst = max(worst, -box_signed_distance(R[a], p[a], model.bodies[a].size / 2,
+                                                    R[b], p[b], model.bodies[b].size / 2))
+    return worst
+
+
+def test_mujoco_box_contacts_on_the_export_hold_the_stacks_as_ours_do(six_by_six):
+    """MuJoCo on the exported model, its box-box collider on the contact pairs:
+    without them its stacks interpenetrate by millimetres as ours do; with
+    them neither model's panels go deeper than the collision tolerance."""
+    pytest.importorskip("mujoco")
+    from panel_deploy.bench.mujoco_peer import run_mujoco
+
+    tolerance = six_by_six["true"].collision.tolerance
+    for on, scene in six_by_six.items():
+        model = build_model(scene)
+        assert ('<pair geom1="r3c6" geom2="r4c2"' in export_mjcf(model)) == (on == "true")
+        s = scene.simulation
+        peer = run_mujoco(model, s.t_end, s.samples, 1e-5)
+        assert peer.success, peer.message
+        ours = simulate(model, s).theta
+        if on == "true":
+            assert deepest_interference(model, peer.theta) < tolerance
+            assert deepest_interference(model, ours) < tolerance
+        else:
+            assert deepest_interference(model, peer.theta) > 10 * tolerance
+            assert deepest_interference(model, ours) > 10 * tolerance

@@ -191,7 +191,7 @@ def solref_parameters(model: Model) -> dict:
             out[("connect", h_index, end)] = (a * k, a * c)
     R, p = forward_kinematics(model, theta)
     for a, b in model.contact_pairs:
-        lo, hi = touching_region(model, R, p, a, b)
+        lo, hi = touching_region(model, R, p, a, b, math.inf)  # a contact pair: it is near
         point = 0.5 * (lo + hi)
         J = (_point_jacobian(model, theta, Jv, Jw, b, _flat(model, R, p, b, point))
              - _point_jacobian(model, theta, Jv, Jw, a, _flat(model, R, p, a, point)))

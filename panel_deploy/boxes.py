@@ -58,7 +58,7 @@ def separation(Ra, ca, ha, Rb, cb, hb, n):
 
 
 @njit(cache=True)
-def least_overlap(Ra, ca, ha, Rb, cb, hb):
+def least_overlap(Ra, ca, ha, Rb, cb, hb, stop_below=-np.inf):
     """Separating-axis test of boxes a and b (given as in :func:`separation`).
 
     Over the 15 candidate axes (the 3 + 3 face normals, then the 9 edge cross
@@ -66,8 +66,10 @@ def least_overlap(Ra, ca, ha, Rb, cb, hb):
     axis of least overlap: returns ``(overlap, axis, along)`` with the overlap
     (m, < 0 if that axis separates the boxes), the unit axis (a 3-tuple) and
     the centre offset ``(c_b - c_a) . axis`` (m) that gives its direction. The
-    first of equal overlaps wins. No allocation: the contact model calls it
-    in every evaluation of the dynamics.
+    first of equal overlaps wins. It returns at the first axis whose overlap
+    is below ``stop_below`` (m): that axis proves the boxes further apart.
+    No allocation: the contact model calls it in every evaluation of the
+    dynamics.
     """
     best = np.inf
     axis = (0.0, 0.0, 0.0)
@@ -96,6 +98,8 @@ def least_overlap(Ra, ca, ha, Rb, cb, hb):
             best = overlap
             axis = (u0, u1, u2)
             along_best = along
+            if best < stop_below:
+                break
     return best, axis, along_best
 
 
@@ -276,7 +280,7 @@ def contact(Ra, ca, ha, Rb, cb, hb, work, reach=0.0):
     """
     if bounding_gap(ca, ha, cb, hb) > reach:
         return 0, (0.0, 0.0, 0.0)
-    depth, axis, along = least_overlap(Ra, ca, ha, Rb, cb, hb)
+    depth, axis, along = least_overlap(Ra, ca, ha, Rb, cb, hb, -reach)
     if depth <= -reach:
         return 0, (0.0, 0.0, 0.0)
     s = 1.0 if along >= 0.0 else -1.0

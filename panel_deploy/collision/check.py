@@ -65,6 +65,9 @@ class CollisionReport:
         s spent in the check.
     first_sample : int
         Index of the sample in row 0 (samples before it were not kept).
+    note : str or None
+        When the first collision is a press (:func:`compliance_note`), why
+        its verdict can depend on a compliance of the model.
     """
 
     pairs: np.ndarray
@@ -85,6 +88,7 @@ class CollisionReport:
     wall_time: float = 0.0
     flat_contact: np.ndarray = field(default=None, repr=False)
     first_sample: int = 0
+    note: str | None = None
 
     @property
     def samples_checked(self) -> int:
@@ -126,6 +130,7 @@ class CollisionReport:
             "refine": self.collision.refine,
             "counters": dict(self.counters),
             "wall_time": self.wall_time,
+            "note": self.note,
         }
         if arrays:
             out.update(t=self.t.tolist(), pairs=[list(n) for n in self.pair_names],
@@ -152,12 +157,40 @@ class CollisionReport:
             if len(self.events) > 1:
                 others = ", ".join(f"{a}-{b}" for a, b in (x.names for x in self.events[1:]))
                 lines.append(f"  also colliding by t_j: {others}")
+            if self.note:
+                lines.append(f"  note: {self.note}")
         if math.isinf(self.d):
             lines.append("d: no pair counted")
         else:
             lines.append(f"d = {self.d * 1e3:.3f} mm at t = {self.d_time:.4f} s "
                          f"({self.d_pair[0]} - {self.d_pair[1]}), over {self.n_valid} valid samples")
         return "\n".join(lines)
+
+
+#: A first collision slower than this along its normal (m/s) is a press, not an
+#: impact: on the paper scene's impacts the normal speed is metres a second.
+PRESS_SPEED = 0.05
+
+
+def compliance_note(model: Model, event: CollisionEvent | None) -> str | None:
+    """Why the verdict on a first collision that is a press (normal speed
+    below ``PRESS_SPEED``) can depend on a compliance of the model, or None.
+
+    Two panels in contact (``model.contact_pairs``) went deeper than the
+    tolerance against the contact's stiffness k_p; with the penalty closure
+    a press can be the loop's compliance at work (with the exact closure
+    some vanish, issue 33).
+    """
+    if event is None or abs(event.normal_speed) >= PRESS_SPEED:
+        return None
+    speed = f"a press at {abs(event.normal_speed):.3f} m/s"
+    if tuple(sorted(event.bodies)) in model.contact_pairs:
+        return (f"{speed} of two panels in contact: it went past the tolerance against "
+                f"contact.k_p = {model.k_p:g} N/m (a stiffer contact may hold it, or it is a jam)")
+    if model.cut_hinges and model.closure.method == "penalty":
+        return (f"{speed} with the penalty closure (k_M = {model.closure.k_M:g} N/m): it can come "
+                "from the closure's compliance; check with --closure exact")
+    return None
 
 
 def _collision_settings(collision) -> CollisionSettings:
@@ -286,4 +319,5 @@ class TrajectoryCheck:
             d=self.d, d_time=self.d_time, d_pair=self.d_pair,
             counters=dict(m.counters, exact_fallbacks=m.exact_fallbacks),
             collision=self.collision, wall_time=time.perf_counter() - self._start,
-            flat_contact=m.flat_contact, first_sample=self._dropped)
+            flat_contact=m.flat_contact, first_sample=self._dropped,
+            note=compliance_note(self.monitor.model, self.first_events[0] if self.first_events else None))

@@ -60,6 +60,8 @@ def deployment_text(s: dict) -> str:
             lines.append(f"first collision at {first['t']:.4g} s{after} between {' and '.join(first['pair'])}, "
                          f"approach speed v = {c['v']:.4g} m/s; smallest distance before it d = {d}"
                          + partial)
+            if c.get("note"):
+                lines.append(f"  note: {c['note']}")
         else:
             lines.append(f"no collision; smallest distance d = {d}{partial}")
     return "\n".join(lines)

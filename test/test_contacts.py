@@ -210,3 +210,19 @@ def test_mujoco_box_contacts_on_the_export_hold_the_stacks_as_ours_do(six_by_six
         else:
             assert deepest_interference(model, peer.theta) > 10 * tolerance
             assert deepest_interference(model, ours) > 10 * tolerance
+
+
+def test_a_press_says_which_compliance_its_verdict_depends_on():
+    from panel_deploy.collision.check import PRESS_SPEED, compliance_note
+    from panel_deploy.collision.monitor import CollisionEvent
+
+    def event(bodies, speed):
+        return CollisionEvent(0.1, None, 20, 0, bodies, ("a", "b"), -1.1e-4, np.zeros(3),
+                              np.array([0.0, 0.0, 1.0]), speed, speed, True)
+    contact = paper_model()
+    pair = contact.contact_pairs[0]
+    assert "contact.k_p = 1e+06 N/m" in compliance_note(contact, event(pair, 0.5 * PRESS_SPEED))
+    assert compliance_note(contact, event(pair, 2 * PRESS_SPEED)) is None  # an impact
+    penalty = paper_model("contact.panels=false")  # the paper's loops close by penalty
+    assert "--closure exact" in compliance_note(penalty, event(pair, 0.01))
+    assert compliance_note(paper_model("contact.panels=false", "closure.method=exact"), event(pair, 0.01)) is None

@@ -231,9 +231,10 @@ def _compiled_loop(scheme):
 
     ``scheme`` DOPRI5: explicit Dormand-Prince 5(4) (scipy RK45's tableau and
     step control). ROS34PW2: the Rosenbrock-W method of :mod:`.rosenbrock`
-    with :func:`kernels.stiff_jacobian` (about one RHS call) taken at the start
-    of every step; the first stage reuses f(y), so a step costs 4 RHS calls,
-    the stiff Jacobian and one n x n LU.
+    with the stiff Jacobian of :func:`rosenbrock.jacobian` (about one RHS
+    call) taken at the start of every step; the first stage reuses f(y), so a
+    step costs 4 RHS calls, the stiff Jacobian and one factorisation of W (an
+    n x n LU, or O(n) on the articulated path).
 
     One run may take several calls. ``Y`` (s, N) is the run's sample array
     (``Y[0]`` the start state, unfilled rows NaN), ``j`` the next sample to
@@ -289,9 +290,7 @@ def _compiled_loop(scheme):
             h = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
             h = min(h, max_step)
         K = np.empty((7, N))
-        A = np.zeros((n, n))
-        B = np.zeros((n, n))
-        fresh = False  # A, B were taken at the current y (a rejected step keeps them)
+        fresh = False  # jac was taken at the current y (a rejected step keeps it)
         status = 0
         code = 0
         while j < s:
@@ -305,10 +304,10 @@ def _compiled_loop(scheme):
             lands = step == target - t
             if implicit:
                 if not fresh:
-                    A, B, ok = kernels.stiff_jacobian(P, y)
+                    jac = rosenbrock.jacobian(P, y)
                     njev += 1
                     fresh = True
-                y1, err, ok = rosenbrock.step(P, y, f, step, A, B, K)
+                y1, err, ok = rosenbrock.step(P, y, f, step, jac, K)
                 nfev += 3
                 nlu += 1
             else:

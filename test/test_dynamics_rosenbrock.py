@@ -64,7 +64,7 @@ def test_w_method_local_error_is_fourth_order_with_any_matrix(jacobian):
     settings = SimulationSection(t_end=1.0, method="DOP853", rtol=1e-13, atol=1e-14, samples=2)
     errors = []
     for h in (4e-3, 2e-3, 1e-3):
-        y1, err, ok = rosenbrock.step(P, y, f, h, rosenbrock.dense(A, B), K)
+        y1, err, ok = rosenbrock.step(P, y, f, h, A, B, K)
         assert ok
         ref = simulate(model, dataclasses.replace(settings, t_end=h),
                        State(0.0, y[:1], y[1:2]))

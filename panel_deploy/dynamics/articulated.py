@@ -29,11 +29,13 @@ MIN_N = 20
 
 
 @njit(cache=True)
-def applies(P):
-    """Whether the rhs and the W-solves take the O(n) path: a tree or a penalty
-    closure (whose cut forces are wrenches like any other) of at least MIN_N
-    coordinates. The exact closure needs ``M^-1 J^T`` and keeps the dense path."""
-    return P.method != EXACT and P.n >= MIN_N
+def applies(method, n):
+    """Whether the rhs and the W-solves of a model (``Packed.method``, ``Packed.n``)
+    take the O(n) path: a tree or a penalty closure (whose cut forces are
+    wrenches like any other) of at least MIN_N coordinates. The exact closure
+    needs ``M^-1 J^T`` and keeps the dense path. (Scalars, not the Packed
+    tuple: passing that to a function costs a reference count per array.)"""
+    return method != EXACT and n >= MIN_N
 
 
 @njit(cache=True)

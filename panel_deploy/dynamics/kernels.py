@@ -562,7 +562,7 @@ def _constraint_factor(L, J, regularisation):
     return Y, LA, ok
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def body_inertias(P, R, p):
     """Angular inertias J (n, 3, 3, kg m^2, see above) and first moments h = m c
     (n, 3, kg m) of the bodies about the ground origin."""
@@ -744,7 +744,7 @@ def air_drag(P, air, R, p, w, vo, f):
     return power
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _bias(P, theta, omega, kin, Jb, hb):
     """Generalised force minus bias by recursive Newton-Euler with zero joint
     acceleration, for the kinematics ``kin`` and :func:`body_inertias`' (J, h).
@@ -834,7 +834,7 @@ def rhs(P, y):
     dy = np.empty(2 * n + 2)
     dy[:n] = omega
     dy[2 * n + 1] = 0.0
-    if articulated.applies(P):
+    if articulated.applies(P.method, P.n):
         kin = kinematics(P, theta, omega)
         R, p, _, _, S = kin
         Jb, hb = body_inertias(P, R, p)
@@ -945,7 +945,7 @@ def _outer_add(out, scale, u):
             out[i, j] += scale * u[i] * u[j]
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def stiff_terms(P, y):
     """The stiff springs and dampers in joint space, ``K = diag(Kd) + U^T
     diag(kk) U`` and ``C = diag(Cd) + U^T diag(cc) U`` (N m/rad, N m s/rad),

@@ -25,9 +25,10 @@ With ``A = -M^-1 K``, ``B = -M^-1 C`` and K, C diagonal plus rank r
 row per cut hinge and five more per penalty closure), that system times M is
 ``(M + h gamma C + h^2 gamma^2 K) v = ...``: the mass matrix plus a joint-space
 diagonal, which the articulated-body algorithm factors in O(n), plus rank r,
-added by the Woodbury identity. Where :func:`articulated.applies`, the steps
-take that path (O(n r) per step, no n x n matrix formed); else the dense
-blocks, an n x n LU per step.
+added by the Woodbury identity: :func:`step_terms`, O(n r) per step with no
+n x n matrix formed, which the compiled loop takes where
+:func:`articulated.applies`; else :func:`step` with the dense blocks, an
+n x n LU per step.
 """
 
 from __future__ import annotations
@@ -133,28 +134,14 @@ def _jac_times(n, A, B, u, out):
 
 
 @njit(cache=True)
-def dense(A, B):
-    """The Jacobian tuple :func:`step` takes for dense blocks A, B (n, n)."""
-    return (A, B, np.zeros((0, 6)), np.zeros((0, 6, 6)), np.zeros(0), np.zeros(0),
-            np.zeros((0, 0)), np.zeros(0), np.zeros(0))
-
-
-@njit(cache=True)
-def jacobian(P, y):
-    """The stiff Jacobian at y for :func:`step`: (A, B, S, I6, Kd, Cd, U, kk, cc).
-
-    Where :func:`articulated.applies`, the terms of :func:`kernels.stiff_terms`
-    with the joint screws S and spatial inertias I6 (A, B empty); else the
-    dense blocks of :func:`kernels.stiff_jacobian` (the rest empty).
-    """
-    if articulated.applies(P):
-        kin, Kd, Cd, U, kk, cc = kernels.stiff_terms(P, y)
-        R, p, _, _, S = kin
-        Jb, hb = kernels.body_inertias(P, R, p)
-        return (np.zeros((0, 0)), np.zeros((0, 0)), S, articulated.inertias(P, Jb, hb),
-                Kd, Cd, U, kk, cc)
-    A, B, _ = kernels.stiff_jacobian(P, y)
-    return dense(A, B)
+def terms(P, y):
+    """The stiff Jacobian at y for :func:`step_terms`: (S, I6, Kd, Cd, U, kk, cc),
+    the terms of :func:`kernels.stiff_terms` with the joint screws S and the
+    spatial inertias I6 of the mass matrix (:mod:`.articulated`)."""
+    kin, Kd, Cd, U, kk, cc = kernels.stiff_terms(P, y)
+    R, p, _, _, S = kin
+    Jb, hb = kernels.body_inertias(P, R, p)
+    return S, articulated.inertias(P, Jb, hb), Kd, Cd, U, kk, cc
 
 
 @njit(cache=True)
@@ -207,99 +194,31 @@ def _add_stiff(Kd, U, kk, x, scale, out, proj):
             out[i] += proj[q] * U[q, i]
 
 
-@njit(cache=True)
-def step(P, y, f, h, jac, K):
-    """One ROS34PW2 step of length h from y (f = rhs(P, y)) with the stiff
-    Jacobian ``jac`` of :func:`jacobian` (or :func:`dense`).
-
-    Stages go to K (4, N). Returns (y1, err, ok): the order-3 solution, the
-    difference to the embedded order-2 one, and False if ``W`` is singular
-    (the caller shortens the step).
-
-    Dense blocks: ``W`` reduced to n x n and LU-factored (module docstring).
-    Terms: the reduced system times M, ``(M + hg C + hg^2 K) v = h M f_v - h
-    (K u_x + C u_v) - hg K r_x`` (u the stage's Jacobian-product argument,
-    r_x = h (f_x + u_v)), solved in O(n r) by :func:`_w_factor`; its ``M
-    f_v`` by :func:`articulated.times`. The two agree to round-off for the same
-    K and C (test_dynamics_articulated).
-    """
-    A, B, S, I6, Kd, Cd, U, kk, cc = jac
-    n = P.n
+@njit(cache=True, inline='always')
+def _stage_input(P, y, f, K, st, yi, u):
+    """f at stage st's state (f itself at stage 0), and into u the stage's
+    Jacobian-product argument ``sum_q gamma_{st q} K[q]`` (left as is at stage 0)."""
+    if st == 0:
+        return f
     N = y.shape[0]
-    hg = h * GAMMA
-    structured = A.shape[0] != n
-    if structured:
-        UA, D, Z, wq, LU, piv, ok = _w_factor(P, hg, S, I6, Kd, Cd, U, kk, cc)
-    else:
-        W = np.empty((n, n))
-        for i in range(n):
-            for j in range(n):
-                W[i, j] = -hg * B[i, j] - hg * hg * A[i, j]
-            W[i, i] += 1.0
-        LU, piv, ok = lu_factor(W)
-    if not ok:
-        return y.copy(), np.full(N, np.inf), False
-    # scratch allocated once per step, not per stage: small-array allocations
-    # cost more than the arithmetic here
-    yi = np.empty(N)
-    r = np.empty(N)
-    u = np.zeros(N)
-    Ju = np.empty(2 * n)
-    work = np.empty(n)
-    work6 = np.empty((2, n + 1, 6))
-    g = np.empty(n)
-    kx = np.empty(n)
-    proj = np.empty(U.shape[0])
-    yq = np.empty(U.shape[0])
-    for st in range(4):
-        if st == 0:
-            fi = f
-        else:
-            for i in range(N):
-                s = y[i]
-                for q in range(st):
-                    if _ALPHA[st, q] != 0.0:
-                        s += _ALPHA[st, q] * K[q, i]
-                yi[i] = s
-            fi = kernels.rhs(P, yi)
-            for i in range(N):
-                s = 0.0
-                for q in range(st):
-                    s += _GAMMA[st, q] * K[q, i]
-                u[i] = s
-        z = K[st]
-        if structured:
-            articulated.times(P, S, I6, fi[n:2 * n], g, work6)
-            for i in range(n):
-                g[i] *= h
-                r[i] = h * (fi[i] + u[n + i])
-                kx[i] = h * u[i] + hg * r[i]
-            _add_stiff(Kd, U, kk, kx, -1.0, g, proj)
-            _add_stiff(Cd, U, cc, u[n:2 * n], -h, g, proj)
-            v = z[n:2 * n]
-            articulated.solve(P, S, UA, D, g, v, work6[0])
-            for q in range(U.shape[0]):
-                s = 0.0
-                for i in range(n):
-                    s += U[q, i] * v[i]
-                proj[q] = wq[q] * s
-            lu_solve(LU, piv, proj, yq)
-            for q in range(U.shape[0]):
-                c = yq[q]
-                for i in range(n):
-                    v[i] -= c * Z[q, i]
-            for i in range(n):
-                z[i] = r[i] + hg * v[i]
-            for i in range(2 * n, N):
-                z[i] = h * fi[i]
-            continue
-        for i in range(N):
-            r[i] = h * fi[i]
-        if st > 0:
-            _jac_times(n, A, B, u, Ju)
-            for i in range(2 * n):
-                r[i] += h * Ju[i]
-        _solve_w(n, hg, A, LU, piv, r, z, work)
+    for i in range(N):
+        s = y[i]
+        for q in range(st):
+            if _ALPHA[st, q] != 0.0:
+                s += _ALPHA[st, q] * K[q, i]
+        yi[i] = s
+    for i in range(N):
+        s = 0.0
+        for q in range(st):
+            s += _GAMMA[st, q] * K[q, i]
+        u[i] = s
+    return kernels.rhs(P, yi)
+
+
+@njit(cache=True, inline='always')
+def _solution(y, K):
+    """The order-3 solution and its difference to the embedded order-2 one."""
+    N = y.shape[0]
     y1 = np.empty(N)
     err = np.empty(N)
     for i in range(N):
@@ -310,4 +229,98 @@ def step(P, y, f, h, jac, K):
             e += (_B[q] - _B_HAT[q]) * K[q, i]
         y1[i] = s
         err[i] = e
+    return y1, err
+
+
+@njit(cache=True)
+def step(P, y, f, h, A, B, K):
+    """One ROS34PW2 step of length h from y (f = rhs(P, y)) with Jacobian blocks A, B.
+
+    Stages go to K (4, N). Returns (y1, err, ok): the order-3 solution, the
+    difference to the embedded order-2 one, and False if ``W`` is singular
+    (the caller shortens the step).
+    """
+    n = P.n
+    N = y.shape[0]
+    hg = h * GAMMA
+    S = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            S[i, j] = -hg * B[i, j] - hg * hg * A[i, j]
+        S[i, i] += 1.0
+    LU, piv, ok = lu_factor(S)
+    if not ok:
+        return y.copy(), np.full(N, np.inf), False
+    # scratch allocated once per step, not per stage: small-array allocations
+    # cost more than the arithmetic here
+    yi = np.empty(N)
+    r = np.empty(N)
+    u = np.empty(N)
+    Ju = np.empty(2 * n)
+    work = np.empty(n)
+    for st in range(4):
+        fi = _stage_input(P, y, f, K, st, yi, u)
+        for i in range(N):
+            r[i] = h * fi[i]
+        if st > 0:
+            _jac_times(n, A, B, u, Ju)
+            for i in range(2 * n):
+                r[i] += h * Ju[i]
+        _solve_w(n, hg, A, LU, piv, r, K[st], work)
+    y1, err = _solution(y, K)
+    return y1, err, True
+
+
+@njit(cache=True)
+def step_terms(P, y, f, h, jac, K):
+    """:func:`step` with the stiff Jacobian as the terms of :func:`terms`, in O(n r).
+
+    Solves the reduced system times M, ``(M + hg C + hg^2 K) v = h M f_v - h
+    (K u_x + C u_v) - hg K r_x`` (u the stage's Jacobian-product argument, r_x
+    = h (f_x + u_v)), by :func:`_w_factor`, its ``M f_v`` by
+    :func:`articulated.times`: the same as :func:`step` with ``A = -M^-1 K``,
+    ``B = -M^-1 C``, to round-off (test_dynamics_articulated).
+    """
+    S, I6, Kd, Cd, U, kk, cc = jac
+    n = P.n
+    N = y.shape[0]
+    hg = h * GAMMA
+    UA, D, Z, wq, LU, piv, ok = _w_factor(P, hg, S, I6, Kd, Cd, U, kk, cc)
+    if not ok:
+        return y.copy(), np.full(N, np.inf), False
+    yi = np.empty(N)
+    rx = np.empty(n)
+    u = np.zeros(N)
+    work6 = np.empty((2, n + 1, 6))
+    g = np.empty(n)
+    kx = np.empty(n)
+    proj = np.empty(U.shape[0])
+    yq = np.empty(U.shape[0])
+    for st in range(4):
+        fi = _stage_input(P, y, f, K, st, yi, u)
+        z = K[st]
+        articulated.times(P, S, I6, fi[n:2 * n], g, work6)
+        for i in range(n):
+            g[i] *= h
+            rx[i] = h * (fi[i] + u[n + i])
+            kx[i] = h * u[i] + hg * rx[i]
+        _add_stiff(Kd, U, kk, kx, -1.0, g, proj)
+        _add_stiff(Cd, U, cc, u[n:2 * n], -h, g, proj)
+        v = z[n:2 * n]
+        articulated.solve(P, S, UA, D, g, v, work6[0])
+        for q in range(U.shape[0]):
+            s = 0.0
+            for i in range(n):
+                s += U[q, i] * v[i]
+            proj[q] = wq[q] * s
+        lu_solve(LU, piv, proj, yq)
+        for q in range(U.shape[0]):
+            c = yq[q]
+            for i in range(n):
+                v[i] -= c * Z[q, i]
+        for i in range(n):
+            z[i] = rx[i] + hg * v[i]
+        for i in range(2 * n, N):
+            z[i] = h * fi[i]
+    y1, err = _solution(y, K)
     return y1, err, True

@@ -194,25 +194,25 @@ def _add_stiff(Kd, U, kk, x, scale, out, proj):
             out[i] += proj[q] * U[q, i]
 
 
-@njit(cache=True, inline='always')
-def _stage_input(P, y, f, K, st, yi, u):
-    """f at stage st's state (f itself at stage 0), and into u the stage's
-    Jacobian-product argument ``sum_q gamma_{st q} K[q]`` (left as is at stage 0)."""
-    if st == 0:
-        return f
-    N = y.shape[0]
-    for i in range(N):
+@njit(cache=True)
+def _stage_state(y, K, st, out):
+    """Write stage st's state ``y + sum_q alpha_{st q} K[q]`` to out (st > 0)."""
+    for i in range(y.shape[0]):
         s = y[i]
         for q in range(st):
             if _ALPHA[st, q] != 0.0:
                 s += _ALPHA[st, q] * K[q, i]
-        yi[i] = s
-    for i in range(N):
+        out[i] = s
+
+
+@njit(cache=True)
+def _stage_argument(K, st, out):
+    """Write stage st's Jacobian-product argument ``sum_q gamma_{st q} K[q]`` to out (st > 0)."""
+    for i in range(out.shape[0]):
         s = 0.0
         for q in range(st):
             s += _GAMMA[st, q] * K[q, i]
-        u[i] = s
-    return kernels.rhs(P, yi)
+        out[i] = s
 
 
 @njit(cache=True, inline='always')
@@ -259,10 +259,15 @@ def step(P, y, f, h, A, B, K):
     Ju = np.empty(2 * n)
     work = np.empty(n)
     for st in range(4):
-        fi = _stage_input(P, y, f, K, st, yi, u)
+        if st == 0:
+            fi = f
+        else:
+            _stage_state(y, K, st, yi)
+            fi = kernels.rhs(P, yi)
         for i in range(N):
             r[i] = h * fi[i]
         if st > 0:
+            _stage_argument(K, st, u)
             _jac_times(n, A, B, u, Ju)
             for i in range(2 * n):
                 r[i] += h * Ju[i]
@@ -297,7 +302,11 @@ def step_terms(P, y, f, h, jac, K):
     proj = np.empty(U.shape[0])
     yq = np.empty(U.shape[0])
     for st in range(4):
-        fi = _stage_input(P, y, f, K, st, yi, u)
+        fi = f
+        if st > 0:  # u stays zero at stage 0
+            _stage_state(y, K, st, yi)
+            fi = kernels.rhs(P, yi)
+            _stage_argument(K, st, u)
         z = K[st]
         articulated.times(P, S, I6, fi[n:2 * n], g, work6)
         for i in range(n):

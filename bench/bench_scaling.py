@@ -9,9 +9,15 @@ Scenes: the paper's 4 x 4 scene as it is, and the first circuit that packs of
 (``CASES``: 0.5 s for the paper scene, 0.2 s for 5 x 6 and 6 x 6, 0.1 s for
 8 x 8 and 10 x 10, which collide or press in the stack within 0.02-0.06 s
 and take seconds per simulated 0.1 s), sampled every 5 ms as the scene.
+The circuits close one loop each (one cut hinge, penalty closure), so from
+5 x 6 on the dynamics take the O(n) articulated path with a rank-6 W-solve
+(``dynamics.articulated``); the paper scene (11 coordinates) the dense one.
 
 Per scene (medians of ``--repeats`` runs, wall clock, 2 shared cores):
-- simulation: wall time per simulated second and per accepted step;
+- simulation: wall time per simulated second and per accepted step, and
+  the process's CPU time per step (the machine is shared: under a load
+  above its 2 cores the wall time of one run varies by 2x, its CPU time by
+  a few percent);
 - collision check, as production runs it (refinement on, up to and with the
   sample of the first collision): set-up of the check (once per run), and
   the median time per sample of :meth:`TrajectoryCheck.update` over all
@@ -111,7 +117,11 @@ def same(a, b) -> bool:
 def measure(rows, cols, t_end, repeats):
     scene, label = scene_of(rows, cols, t_end)
     model = build_model(scene)
-    runs = [simulate(model, scene.simulation) for _ in range(repeats)]
+    runs, cpu = [], []
+    for _ in range(repeats):
+        c0 = time.process_time()
+        runs.append(simulate(model, scene.simulation))
+        cpu.append(time.process_time() - c0)
     result = runs[0]
     wall = statistics.median(r.wall_time for r in runs)
     collisions = [CollisionSettings.from_scene(scene, prune=prune) for prune in (False, True)]
@@ -130,6 +140,7 @@ def measure(rows, cols, t_end, repeats):
     return dict(
         label=label, bodies=model.n_bodies, joints=model.n_coords, pairs=len(model.collision_pairs),
         t_end=t_end, steps=result.nsteps, sim_per_s=wall / result.t[-1], per_step=wall / result.nsteps,
+        cpu_step=statistics.median(cpu) / result.nsteps,
         setup=statistics.median(setup), before=statistics.median(before), after=statistics.median(after),
         ratio=statistics.median(ratio), dj=dj,
         exact=report.counters["exact_pairs"] / report.counters["samples"], checked=report.counters["samples"],
@@ -154,18 +165,19 @@ def main(argv=None):
              f"check times per sample up to the first collision, refinement on",
              "",
              f"{'scene':22s} {'n':>3s} {'joints':>6s} {'pairs':>5s} {'t_end':>5s} {'steps':>6s} "
-             f"{'sim s/s':>8s} {'us/step':>8s} {'setup ms':>8s} {'before ms':>9s} {'after ms':>8s} "
+             f"{'sim s/s':>8s} {'us/step':>8s} {'cpu us':>7s} {'setup ms':>8s} {'before ms':>9s} {'after ms':>8s} "
              f"{'D_j ms':>7s} {'exact':>6s} {'same':>5s}  outcome"]
     for x in rows:
         lines.append(f"{x['label']:22s} {x['bodies']:3d} {x['joints']:6d} {x['pairs']:5d} {x['t_end']:5.2f} "
-                     f"{x['steps']:6d} {x['sim_per_s']:8.2f} {x['per_step'] * 1e6:8.1f} "
+                     f"{x['steps']:6d} {x['sim_per_s']:8.2f} {x['per_step'] * 1e6:8.1f} {x['cpu_step'] * 1e6:7.1f} "
                      f"{x['setup'] * 1e3:8.1f} {x['before'] * 1e3:9.3f} {x['after'] * 1e3:8.3f} "
                      f"{x['dj'] * 1e3:7.3f} {x['exact']:6.1f} {str(x['identical']):>5s}  "
                      f"{x['outcome']} ({x['checked']} samples checked)")
     n = np.array([x["bodies"] for x in rows], dtype=float)
     lines += ["", "exponent against n (bodies), least squares on log-log over the five scenes:"]
     for key, name in (("pairs", "pairs P"), ("sim_per_s", "simulation, wall s per simulated s"),
-                      ("per_step", "simulation, wall per step"), ("setup", "check set-up"),
+                      ("per_step", "simulation, wall per step"),
+                      ("cpu_step", "simulation, CPU per step"), ("setup", "check set-up"),
                       ("before", "check per sample, before (prune off)"),
                       ("after", "check per sample, after (prune on)"), ("dj", "D_j per sample (refine off)")):
         lines.append(f"  {name:40s} {exponent(n, [x[key] for x in rows]):5.2f}")

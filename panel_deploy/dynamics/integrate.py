@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import ModelError
-from . import kernels, rosenbrock
+from . import articulated, kernels, rosenbrock
 from .result import Status
 
 #: scipy's implicit solvers: they get the analytic Jacobian.
@@ -212,6 +212,8 @@ def _dopri5_step(P, y, f, h, K):
 #: Compiled schemes (keys of ``COMPILED_LOOPS``).
 DOPRI5, ROS34PW2 = 0, 1
 SCHEMES = {"dopri5": DOPRI5, "ros34pw2": ROS34PW2}
+#: Key of the ROS34PW2 loop on the O(n) path (where :func:`articulated.applies`).
+ROS34PW2_TERMS = 2
 
 
 def _compiled_loop(scheme):
@@ -222,6 +224,9 @@ def _compiled_loop(scheme):
     each, so numba prunes the other scheme's branches before typing them, and
     a run compiles only its own stepper (compile time is most of a first
     run; numba caches each closure apart, by the value of ``implicit``).
+    Likewise ``structured`` (``scheme`` ROS34PW2_TERMS: ROS34PW2 with the
+    O(n) stiff Jacobian): chosen at run time inside one loop, it cost the
+    paper scene's dense steps ~6 %.
 
     DOPRI5 steps exactly onto every t_eval[j]. ROS34PW2 steps freely and fills
     the samples it passes by cubic Hermite interpolation of y and f at the step
@@ -231,9 +236,11 @@ def _compiled_loop(scheme):
 
     ``scheme`` DOPRI5: explicit Dormand-Prince 5(4) (scipy RK45's tableau and
     step control). ROS34PW2: the Rosenbrock-W method of :mod:`.rosenbrock`
-    with :func:`kernels.stiff_jacobian` (about one RHS call) taken at the start
-    of every step; the first stage reuses f(y), so a step costs 4 RHS calls,
-    the stiff Jacobian and one n x n LU.
+    with the stiff Jacobian (:func:`kernels.stiff_jacobian`, or for
+    ROS34PW2_TERMS :func:`rosenbrock.terms`; about one RHS call) taken at the
+    start of every step; the first stage reuses f(y), so a
+    step costs 4 RHS calls, the stiff Jacobian and one factorisation of W (an
+    n x n LU, or O(n) on the articulated path).
 
     One run may take several calls. ``Y`` (s, N) is the run's sample array
     (``Y[0]`` the start state, unfilled rows NaN), ``j`` the next sample to
@@ -256,7 +263,8 @@ def _compiled_loop(scheme):
     need far more than max_steps (:func:`_off_pace`; status -4 too) (rows of Y
     from j on stay NaN).
     """
-    implicit = scheme == ROS34PW2
+    structured = scheme == ROS34PW2_TERMS
+    implicit = scheme == ROS34PW2 or structured
 
     @njit(cache=True)
     def loop(P, t_eval, Y, j, j_stop, carry, counts, rtol, atol, max_step, locate,
@@ -289,9 +297,7 @@ def _compiled_loop(scheme):
             h = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
             h = min(h, max_step)
         K = np.empty((7, N))
-        A = np.zeros((n, n))
-        B = np.zeros((n, n))
-        fresh = False  # A, B were taken at the current y (a rejected step keeps them)
+        fresh = False  # jac, or A and B, taken at the current y (a rejected step keeps them)
         status = 0
         code = 0
         while j < s:
@@ -305,10 +311,16 @@ def _compiled_loop(scheme):
             lands = step == target - t
             if implicit:
                 if not fresh:
-                    A, B, ok = kernels.stiff_jacobian(P, y)
+                    if structured:
+                        jac = rosenbrock.terms(P, y)
+                    else:
+                        A, B, ok = kernels.stiff_jacobian(P, y)
                     njev += 1
                     fresh = True
-                y1, err, ok = rosenbrock.step(P, y, f, step, A, B, K)
+                if structured:
+                    y1, err, ok = rosenbrock.step_terms(P, y, f, step, jac, K)
+                else:
+                    y1, err, ok = rosenbrock.step(P, y, f, step, A, B, K)
                 nfev += 3
                 nlu += 1
             else:
@@ -381,7 +393,7 @@ def _compiled_loop(scheme):
 
 
 #: The compiled loop of each scheme (see :func:`_compiled_loop`).
-COMPILED_LOOPS = {k: _compiled_loop(k) for k in (DOPRI5, ROS34PW2)}
+COMPILED_LOOPS = {k: _compiled_loop(k) for k in (DOPRI5, ROS34PW2, ROS34PW2_TERMS)}
 
 
 #: What the compiled loop's failure codes say: 1-4 are minus the Status of the
@@ -432,7 +444,10 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
     :func:`choose_scheme` picks) called once per block of samples (see
     :func:`integrate_blocks`)."""
     scheme = choose_scheme(P, y0) if name == "compiled" else name
-    loop = COMPILED_LOOPS[SCHEMES[scheme]]
+    key = SCHEMES[scheme]
+    if key == ROS34PW2 and articulated.applies(P.method, P.n):
+        key = ROS34PW2_TERMS
+    loop = COMPILED_LOOPS[key]
     s, N = len(t_eval), len(y0)
     Y = np.full((s, N), np.nan)
     Y[0] = y0

@@ -5,19 +5,23 @@ rad/s), the energy dissipated by all dampers and the air drag since t = 0 (J)
 and the work done on the system by the exact-closure constraint forces (J,
 zero for penalty).
 
-Algorithm (Featherstone, "Rigid Body Dynamics Algorithms", ch. 5-6), with all
+Algorithm (Featherstone, "Rigid Body Dynamics Algorithms", ch. 5-7), with all
 spatial vectors in the ground frame about its origin, angular part first:
 
 * forward kinematics down the tree;
-* mass matrix by the composite-rigid-body algorithm (CRBA), bias forces
-  (velocity product, gravity, air drag, cut-hinge wrenches) by recursive Newton-Euler
-  (RNEA) with zero joint acceleration;
-* ``M qdd = Q - b`` solved by Cholesky.
+* bias forces (velocity product, gravity, air drag, cut-hinge wrenches) by
+  recursive Newton-Euler (RNEA) with zero joint acceleration, O(n);
+* ``M qdd = Q - b`` solved in O(n) by the articulated-body algorithm
+  (:mod:`.articulated`) for a tree or a penalty closure of at least
+  ``articulated.MIN_N`` coordinates; else the mass matrix by the
+  composite-rigid-body algorithm (CRBA, O(n d) for tree depth d) and Cholesky
+  (O(n^3)).
 
-CRBA is O(n d) for tree depth d and the Cholesky O(n^3), against O(n) for the
-articulated-body algorithm. With n = 11 that is a few hundred flops, below the
-kernel's fixed costs, and the exact closure needs ``M^-1 J^T`` anyway, which
-ABA does not give; the factored mass matrix also yields the kinetic energy.
+The dense path stays for small n, where its n^3 / 6 flops cost no more than
+the articulated path's 6 x 6 algebra (measured: equal at 11 coordinates, the
+paper scene), and for the exact closure, which needs ``M^-1 J^T``.
+:func:`observe` (per sample, not per step) keeps the CRBA mass matrix for the
+kinetic energy.
 
 Hinge law, Eq. (2)-(4), with the contact elements in parallel with the hinge
 spring (paper, text below Eq. 4): ``tau = -k theta - c omega`` plus, past a
@@ -37,6 +41,7 @@ from numba import njit
 from .._numba_cache import announce_compilation
 from ..boxes import contact as contact_of_boxes
 from ..boxes import scratch as box_scratch
+from . import articulated
 from .pack import EXACT, PENALTY, TREE
 
 # Every kernel module imports this one (collision's through dynamics), so the
@@ -559,35 +564,47 @@ def _constraint_factor(L, J, regularisation):
     return Y, LA, ok
 
 
-@njit(cache=True)
-def _crba(P, R, p, S):
-    """Angular inertias J (n, 3, 3) of the bodies (see above) and the mass matrix (n, n)."""
+@njit(cache=True, inline='always')
+def body_inertias(P, R, p):
+    """Angular inertias J (n, 3, 3, kg m^2, see above) and first moments h = m c
+    (n, 3, kg m) of the bodies about the ground origin."""
     n = P.n
     Jb = np.empty((n, 3, 3))
-    hc = np.empty((n, 3))
+    hb = np.empty((n, 3))
     for i in range(n):
         _angular_inertia(P, R, p, i, Jb)
-        _put(hc, i, _scale(_get(p, i), P.mass[i]))
-    # composite bodies (Jc, hc, mc), accumulated leaves first
+        _put(hb, i, _scale(_get(p, i), P.mass[i]))
+    return Jb, hb
+
+
+@njit(cache=True)
+def _crba(P, S, Jb, hb):
+    """The mass matrix (n, n) from :func:`body_inertias`' (J, h)."""
+    n = P.n
+    # composite bodies (Jc, hc, mc), accumulated leaves first; h and m share
+    # one array (an allocation costs the paper scene's rhs ~1 %)
     Jc = Jb.copy()
-    mc = P.mass.copy()
+    hm = np.empty((n, 4))
+    for i in range(n):
+        _put(hm, i, _get(hb, i))
+        hm[i, 3] = P.mass[i]
     for i in range(n - 1, -1, -1):
         a = P.parent[i]
         if a < n:
             for r in range(3):
                 for q in range(3):
                     Jc[a, r, q] += Jc[i, r, q]
-            _put(hc, a, _add(_get(hc, a), _get(hc, i)))
-            mc[a] += mc[i]
+            for k in range(4):
+                hm[a, k] += hm[i, k]
     M = np.zeros((n, n))
     for i in range(n):
-        Fw, Fv = _inertia_times(Jc, i, _get(hc, i), mc[i], _get(S, i), _get(S, i, 3))
+        Fw, Fv = _inertia_times(Jc, i, _get(hm, i), hm[i, 3], _get(S, i), _get(S, i, 3))
         M[i, i] = _dot6(S, i, Fw, Fv)
         j = P.parent[i]
         while j < n:
             M[i, j] = M[j, i] = _dot6(S, j, Fw, Fv)
             j = P.parent[j]
-    return Jb, M
+    return M
 
 
 # --- air drag on the panel faces ---
@@ -808,21 +825,17 @@ def panel_contacts(P, contact, R, p, w, vo, f):
     return energy, power
 
 
-@njit(cache=True)
-def mass_and_bias(P, theta, omega):
-    """Mass matrix, generalised force and everything the energy needs.
+@njit(cache=True, inline='always')
+def _bias(P, theta, omega, kin, Jb, hb):
+    """Generalised force minus bias by recursive Newton-Euler with zero joint
+    acceleration, for the kinematics ``kin`` and :func:`body_inertias`' (J, h).
 
-    Returns
-    -------
-    M : (n, n) kg m^2
-    Q : (n,) generalised force minus bias, ``M qdd = Q`` for the tree, N m
-    kin : tuple (R, p, w, vo, S)
-    acc : (n + 1, 6) velocity-product spatial accelerations
-    spring, dissipation, gravity_energy : float  J, W (dampers and air drag), J
+    Returns Q (n,) N m (``M qdd = Q`` for the tree), the velocity-product
+    spatial accelerations (n + 1, 6), and the spring energy, dissipation and
+    gravity energy (J, W: dampers and air drag, J).
     """
     n = P.n
-    R, p, w, vo, S = kinematics(P, theta, omega)
-    Jb, M = _crba(P, R, p, S)
+    R, p, w, vo, S = kin
     if P.method != TREE:
         f, spring, dissipation = cut_forces(P, R, p, w, vo)
         for i in range(n + 1):
@@ -843,9 +856,9 @@ def mass_and_bias(P, theta, omega):
                           _scale(_add(_cross(wa, sv), _cross(_get(vo, a), sw)), omega[i])), 3)
         m = P.mass[i]
         pi, wi, voi = _get(p, i), _get(w, i), _get(vo, i)
-        hb = _scale(pi, m)
-        hw, hv = _inertia_times(Jb, i, hb, m, wi, voi)
-        fw, fv = _inertia_times(Jb, i, hb, m, _get(acc, i), _get(acc, i, 3))
+        hi = _get(hb, i)
+        hw, hv = _inertia_times(Jb, i, hi, m, wi, voi)
+        fw, fv = _inertia_times(Jb, i, hi, m, _get(acc, i), _get(acc, i, 3))
         fw = _add(fw, _add(_cross(wi, hw), _cross(voi, hv)))
         fv = _add(fv, _cross(wi, hv))
         if P.has_gravity:
@@ -869,20 +882,56 @@ def mass_and_bias(P, theta, omega):
         if a < n:
             for k in range(6):
                 f[a, k] += f[i, k]
-    return M, Q, (R, p, w, vo, S), acc, spring, dissipation, gravity_energy
+    return Q, acc, spring, dissipation, gravity_energy
+
+
+@njit(cache=True)
+def mass_and_bias(P, theta, omega):
+    """Mass matrix, generalised force and everything the energy needs.
+
+    Returns
+    -------
+    M : (n, n) kg m^2
+    Q : (n,) generalised force minus bias, ``M qdd = Q`` for the tree, N m
+    kin : tuple (R, p, w, vo, S)
+    acc : (n + 1, 6) velocity-product spatial accelerations
+    spring, dissipation, gravity_energy : float  J, W (dampers and air drag), J
+    """
+    kin = kinematics(P, theta, omega)
+    R, p, _, _, S = kin
+    Jb, hb = body_inertias(P, R, p)
+    M = _crba(P, S, Jb, hb)
+    Q, acc, spring, dissipation, gravity_energy = _bias(P, theta, omega, kin, Jb, hb)
+    return M, Q, kin, acc, spring, dissipation, gravity_energy
 
 
 @njit(cache=True)
 def rhs(P, y):
-    """dy/dt of the state vector (see the module docstring); NaN if M is not positive definite."""
+    """dy/dt of the state vector (see the module docstring); NaN if M is not positive definite.
+
+    Solves ``M qdd = Q`` by the articulated-body algorithm (O(n)) where
+    :func:`articulated.applies`, else by CRBA and Cholesky.
+    """
     n = P.n
     theta = y[:n]
     omega = y[n:2 * n]
-    M, qdd, kin, acc, spring, dissipation, _ = mass_and_bias(P, theta, omega)
     dy = np.empty(2 * n + 2)
     dy[:n] = omega
-    dy[2 * n] = dissipation
     dy[2 * n + 1] = 0.0
+    if articulated.applies(P.method, P.n):
+        kin = kinematics(P, theta, omega)
+        R, p, _, _, S = kin
+        Jb, hb = body_inertias(P, R, p)
+        Q, _, _, dissipation, _ = _bias(P, theta, omega, kin, Jb, hb)
+        dy[2 * n] = dissipation
+        U, D, ok = articulated.factor(P, S, articulated.inertias(P, Jb, hb), np.zeros(n))
+        if not ok:
+            dy[:] = np.nan
+            return dy
+        articulated.solve(P, S, U, D, Q, dy[n:2 * n], np.empty((n + 1, 6)))
+        return dy
+    M, qdd, kin, acc, _, dissipation, _ = mass_and_bias(P, theta, omega)
+    dy[2 * n] = dissipation
     L, ok = _cholesky(M)
     if not ok:
         dy[:] = np.nan
@@ -981,81 +1030,126 @@ def _outer_add(out, scale, u):
 
 
 @njit(cache=True)
-def _contact_stiffness(P, contact, R, p, S, Kq, Cq):
-    """Add to Kq, Cq (n, n) the stiffness and damping of the panel contacts
-    pressed now: ``k G^T G``, ``c G^T G`` per contact point at its depth
-    (:func:`_contact_law`), G the row of -d(depth)/d theta there."""
+def _pressed_points(P, contact, R, p):
+    """How many panel contact points are pressed (depth > 0) at poses (R, p)."""
+    if contact is None:
+        return 0
+    work = box_scratch()
+    depths = work[-1]
+    count = 0
+    for r in range(contact.shape[0]):
+        found, _ = _pair_points(P, contact, r, R, p, work, 0.0)
+        for q in range(found):
+            count += depths[q] > 0.0
+    return count
+
+
+@njit(cache=True)
+def _contact_rows(P, contact, R, p, S, U, kk, cc, start):
+    """Write from row ``start`` of U, kk, cc the pressed panel contact points:
+    G, the row of -d(depth)/d theta, and the stiffness and damping of
+    :func:`_contact_law` at its depth, so that K gains ``k G^T G`` (C likewise)."""
     if contact is None:
         return
     Jp = np.empty((3, P.n))
-    G = np.empty(P.n)
     work = box_scratch()
     points, depths = work[-2], work[-1]
+    row = start
     for r in range(contact.shape[0]):
-        count, normal = _pair_points(P, contact, r, R, p, work, 0.0)
-        for q in range(count):
+        found, normal = _pair_points(P, contact, r, R, p, work, 0.0)
+        for q in range(found):
             if depths[q] <= 0.0:
                 continue
             _, _, _, k, c = _contact_law(depths[q], 0.0, contact[r, 8], contact[r, 9])
+            kk[row], cc[row] = k, c
             x = (points[q, 0], points[q, 1], points[q, 2])
             Jp[:] = 0.0
             _point_jacobian(P, S, int(contact[r, 1]), x, Jp, 0, 1.0)
             _point_jacobian(P, S, int(contact[r, 0]), x, Jp, 0, -1.0)
             for col in range(P.n):
-                G[col] = normal[0] * Jp[0, col] + normal[1] * Jp[1, col] + normal[2] * Jp[2, col]
-            _outer_add(Kq, k, G)
-            _outer_add(Cq, c, G)
+                U[row, col] = normal[0] * Jp[0, col] + normal[1] * Jp[1, col] + normal[2] * Jp[2, col]
+            row += 1
+
+
+@njit(cache=True, inline='always')
+def stiff_terms(P, y):
+    """The stiff springs and dampers in joint space, ``K = diag(Kd) + U^T
+    diag(kk) U`` and ``C = diag(Cd) + U^T diag(cc) U`` (N m/rad, N m s/rad),
+    at the current configuration.
+
+    ``Kd = k + k_s`` on tree hinges in contact (Eq. 2-4), likewise Cd; one
+    row of U per cut hinge, its angle Jacobian (its own spring and contact),
+    and for PENALTY five per cut hinge, the closure Jacobian of Eq. (5) with
+    weights k_M, k_M, k_M, k_N, k_N (c likewise); then one per panel contact
+    point pressed now (:func:`_contact_rows`). Returns (kin, Kd, Cd, U, kk,
+    cc), kin the :func:`kinematics` tuple; U is (r, n), r = 6 m (PENALTY) or
+    m plus the pressed contact points, so K, C are diagonal plus rank r.
+    """
+    n = P.n
+    theta = y[:n]
+    kin = kinematics(P, theta, y[n:2 * n])
+    R, p, w, vo, S = kin
+    Kd = np.empty(n)
+    Cd = np.empty(n)
+    for i in range(n):
+        contact = contact_mode(theta[i]) != 1
+        Kd[i] = P.k[i] + (P.k_s if contact else 0.0)
+        Cd[i] = P.c[i] + (P.c_s if contact else 0.0)
+    m = P.cut_a.shape[0]
+    closure = 6 * m if P.method == PENALTY else m
+    rows = closure + _pressed_points(P, P.contact, R, p)
+    U = np.zeros((rows, n))
+    kk = np.empty(rows)
+    cc = np.empty(rows)
+    _contact_rows(P, P.contact, R, p, S, U, kk, cc, closure)
+    Jw = np.empty((3, n))
+    for j in range(m):
+        th, g = _cut_angle(P, j, R)
+        Jw[:] = 0.0
+        _angular_jacobian(P, S, P.cut_b[j], Jw, 0, 1.0)
+        _angular_jacobian(P, S, P.cut_a[j], Jw, 0, -1.0)
+        for col in range(n):
+            U[j, col] = g[0] * Jw[0, col] + g[1] * Jw[1, col] + g[2] * Jw[2, col]
+        contact = contact_mode(th) != 1
+        kk[j] = P.cut_k[j] + (P.k_s if contact else 0.0)
+        cc[j] = P.cut_c[j] + (P.c_s if contact else 0.0)
+    if P.method == PENALTY:
+        _, J, _ = closure_jacobian(P, R, p, w, vo, S, np.zeros((0, 6)))
+        for r in range(J.shape[0]):
+            on_M = r % 5 < 3
+            U[m + r] = J[r]
+            kk[m + r] = P.k_M if on_M else P.k_N
+            cc[m + r] = P.c_M if on_M else P.c_N
+    return kin, Kd, Cd, U, kk, cc
 
 
 @njit(cache=True)
 def stiff_jacobian(P, y):
     """The stiff linear part of ``A = d qdd / d theta`` and ``B = d qdd / d omega``, (n, n).
 
-    Keeps only the springs and dampers, at the current configuration: ``A =
-    -M^-1 K``, ``B = -M^-1 C`` with ``K = diag(k) + k_s`` on hinges in contact
-    (Eq. 2-4), the cut hinges' own spring and contact through their angle
-    Jacobian, and for PENALTY ``J^T diag(k_M, k_M, k_M, k_N, k_N) J`` (likewise
-    c) with J the closure Jacobian of Eq. (5). For EXACT the same is projected
-    onto the constraint (``M^-1 -> M^-1 - Y (J Y)^-1 J M^-1``, ``Y = M^-1 J^T``)
-    and the Baumgarte terms ``-Y (J Y)^-1 J / T^2`` (A) and ``2 / T`` (B) are
-    added. Velocity products, gravity, air drag and the terms of order gap x
-    stiffness are left out: they are not stiff, and a W-method does not need
-    them.
+    Keeps only the springs and dampers of :func:`stiff_terms`, at the current
+    configuration: ``A = -M^-1 K``, ``B = -M^-1 C``. For EXACT the same is
+    projected onto the constraint (``M^-1 -> M^-1 - Y (J Y)^-1 J M^-1``, ``Y =
+    M^-1 J^T``) and the Baumgarte terms ``-Y (J Y)^-1 J / T^2`` (A) and ``2 /
+    T`` (B) are added. Velocity products, gravity, air drag and the terms of
+    order gap x stiffness are left out: they are not stiff, and a W-method
+    does not need them.
     Costs about one RHS call, against 2 n for the finite-difference Jacobian.
     Returns (A, B, ok); ok is False if M is not positive definite.
     """
     n = P.n
-    theta = y[:n]
-    R, p, w, vo, S = kinematics(P, theta, y[n:2 * n])
-    _, M = _crba(P, R, p, S)
+    kin, Kd, Cd, U, kk, cc = stiff_terms(P, y)
+    R, p, w, vo, S = kin
+    Jb, hb = body_inertias(P, R, p)
+    M = _crba(P, S, Jb, hb)
     Kq = np.zeros((n, n))
     Cq = np.zeros((n, n))
     for i in range(n):
-        contact = contact_mode(theta[i]) != 1
-        Kq[i, i] = P.k[i] + (P.k_s if contact else 0.0)
-        Cq[i, i] = P.c[i] + (P.c_s if contact else 0.0)
-    Jw = np.empty((3, n))
-    G = np.empty(n)
-    for j in range(P.cut_a.shape[0]):
-        th, g = _cut_angle(P, j, R)
-        Jw[:] = 0.0
-        _angular_jacobian(P, S, P.cut_b[j], Jw, 0, 1.0)
-        _angular_jacobian(P, S, P.cut_a[j], Jw, 0, -1.0)
-        for col in range(n):
-            G[col] = g[0] * Jw[0, col] + g[1] * Jw[1, col] + g[2] * Jw[2, col]
-        contact = contact_mode(th) != 1
-        _outer_add(Kq, P.cut_k[j] + (P.k_s if contact else 0.0), G)
-        _outer_add(Cq, P.cut_c[j] + (P.c_s if contact else 0.0), G)
-    _contact_stiffness(P, P.contact, R, p, S, Kq, Cq)
-    if P.method != TREE:
-        c, J, _ = closure_jacobian(P, R, p, w, vo, S, np.zeros((0, 6)))
-    else:
-        J = np.zeros((0, n))
-    if P.method == PENALTY:
-        for r in range(J.shape[0]):
-            on_M = r % 5 < 3
-            _outer_add(Kq, P.k_M if on_M else P.k_N, J[r])
-            _outer_add(Cq, P.c_M if on_M else P.c_N, J[r])
+        Kq[i, i] = Kd[i]
+        Cq[i, i] = Cd[i]
+    for r in range(U.shape[0]):
+        _outer_add(Kq, kk[r], U[r])
+        _outer_add(Cq, cc[r], U[r])
     L, ok = _cholesky(M)
     A = np.zeros((n, n))
     B = np.zeros((n, n))
@@ -1070,6 +1164,7 @@ def stiff_jacobian(P, y):
             A[i, col] = -A[i, col]
             B[i, col] = -B[i, col]
     if P.method == EXACT:
+        _, J, _ = closure_jacobian(P, R, p, w, vo, S, np.zeros((0, 6)))
         Y, LA, ok = _constraint_factor(L, J, P.regularisation)
         if not ok:
             return A, B, False

@@ -19,6 +19,16 @@ qdd / d omega`` (the energy rows feed nothing back and are taken as zero,
 which a W-method allows). Then ``W [x; v] = [r_x; r_v]`` reduces to the n x n
 system ``(I - h gamma B - h^2 gamma^2 A) v = r_v + h gamma A r_x``, ``x = r_x
 + h gamma v``.
+
+With ``A = -M^-1 K``, ``B = -M^-1 C`` and K, C diagonal plus rank r
+(:func:`kernels.stiff_terms`: hinge springs and contact on the diagonal, one
+row per cut hinge and five more per penalty closure), that system times M is
+``(M + h gamma C + h^2 gamma^2 K) v = ...``: the mass matrix plus a joint-space
+diagonal, which the articulated-body algorithm factors in O(n), plus rank r,
+added by the Woodbury identity: :func:`step_terms`, O(n r) per step with no
+n x n matrix formed, which the compiled loop takes where
+:func:`articulated.applies`; else :func:`step` with the dense blocks, an
+n x n LU per step.
 """
 
 from __future__ import annotations
@@ -26,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from . import kernels
+from . import articulated, kernels
 
 GAMMA = 4.3586652150845900e-01
 _ALPHA = np.array([
@@ -124,6 +134,105 @@ def _jac_times(n, A, B, u, out):
 
 
 @njit(cache=True)
+def terms(P, y):
+    """The stiff Jacobian at y for :func:`step_terms`: (S, I6, Kd, Cd, U, kk, cc),
+    the terms of :func:`kernels.stiff_terms` with the joint screws S and the
+    spatial inertias I6 of the mass matrix (:mod:`.articulated`)."""
+    kin, Kd, Cd, U, kk, cc = kernels.stiff_terms(P, y)
+    R, p, _, _, S = kin
+    Jb, hb = kernels.body_inertias(P, R, p)
+    return S, articulated.inertias(P, Jb, hb), Kd, Cd, U, kk, cc
+
+
+@njit(cache=True)
+def _w_factor(P, hg, S, I6, Kd, Cd, U, kk, cc):
+    """Factor ``M W = H + U^T diag(wq) U`` with ``H = M + diag(hg Cd + hg^2 Kd)``
+    (O(n) by :func:`articulated.factor`) and ``wq = hg cc + hg^2 kk``.
+
+    Returns (UA, D, Z, wq, LU, piv, ok): the factor of H, ``Z = H^-1 U^T`` as
+    rows (r, n), and the LU of the Woodbury capacitance ``1 + diag(wq) U Z^T``
+    (r, r), in the form without ``diag(wq)^-1`` (a weight may be zero).
+    """
+    n = P.n
+    r = U.shape[0]
+    arm = np.empty(n)
+    for i in range(n):
+        arm[i] = hg * Cd[i] + hg * hg * Kd[i]
+    UA, D, ok = articulated.factor(P, S, I6, arm)
+    Z = np.empty((r, n))
+    wq = np.empty(r)
+    cap = np.zeros((r, r))
+    if not ok:
+        return UA, D, Z, wq, cap, np.arange(r), False
+    work = np.empty((n + 1, 6))
+    for q in range(r):
+        articulated.solve(P, S, UA, D, U[q], Z[q], work)
+        wq[q] = hg * cc[q] + hg * hg * kk[q]
+    for q in range(r):
+        for c in range(r):
+            s = 0.0
+            for i in range(n):
+                s += U[q, i] * Z[c, i]
+            cap[q, c] = wq[q] * s
+        cap[q, q] += 1.0
+    LU, piv, ok = lu_factor(cap)
+    return UA, D, Z, wq, LU, piv, ok
+
+
+@njit(cache=True)
+def _add_stiff(Kd, U, kk, x, scale, out, proj):
+    """out += scale (diag(Kd) + U^T diag(kk) U) x; proj is (r,) scratch."""
+    for q in range(U.shape[0]):
+        s = 0.0
+        for i in range(x.shape[0]):
+            s += U[q, i] * x[i]
+        proj[q] = scale * kk[q] * s
+    for i in range(x.shape[0]):
+        out[i] += scale * Kd[i] * x[i]
+    for q in range(U.shape[0]):
+        for i in range(x.shape[0]):
+            out[i] += proj[q] * U[q, i]
+
+
+@njit(cache=True)
+def _stage_state(y, K, st, out):
+    """Write stage st's state ``y + sum_q alpha_{st q} K[q]`` to out (st > 0)."""
+    for i in range(y.shape[0]):
+        s = y[i]
+        for q in range(st):
+            if _ALPHA[st, q] != 0.0:
+                s += _ALPHA[st, q] * K[q, i]
+        out[i] = s
+
+
+@njit(cache=True)
+def _stage_argument(K, st, out):
+    """Write stage st's Jacobian-product argument ``sum_q gamma_{st q} K[q]`` to out (st > 0)."""
+    for i in range(out.shape[0]):
+        s = 0.0
+        for q in range(st):
+            s += _GAMMA[st, q] * K[q, i]
+        out[i] = s
+
+
+@njit(cache=True, inline='always')
+def _solution(y, K):
+    """The order-3 solution and its difference to the embedded order-2 one."""
+    N = y.shape[0]
+    y1 = np.empty(N)
+    err = np.empty(N)
+    for i in range(N):
+        s = y[i]
+        e = 0.0
+        for q in range(4):
+            s += _B[q] * K[q, i]
+            e += (_B[q] - _B_HAT[q]) * K[q, i]
+        y1[i] = s
+        err[i] = e
+    return y1, err
+
+
+@njit(cache=True)
 def step(P, y, f, h, A, B, K):
     """One ROS34PW2 step of length h from y (f = rhs(P, y)) with Jacobian blocks A, B.
 
@@ -153,33 +262,74 @@ def step(P, y, f, h, A, B, K):
         if st == 0:
             fi = f
         else:
-            for i in range(N):
-                s = y[i]
-                for q in range(st):
-                    if _ALPHA[st, q] != 0.0:
-                        s += _ALPHA[st, q] * K[q, i]
-                yi[i] = s
+            _stage_state(y, K, st, yi)
             fi = kernels.rhs(P, yi)
         for i in range(N):
             r[i] = h * fi[i]
         if st > 0:
-            for i in range(N):
-                s = 0.0
-                for q in range(st):
-                    s += _GAMMA[st, q] * K[q, i]
-                u[i] = s
+            _stage_argument(K, st, u)
             _jac_times(n, A, B, u, Ju)
             for i in range(2 * n):
                 r[i] += h * Ju[i]
         _solve_w(n, hg, A, LU, piv, r, K[st], work)
-    y1 = np.empty(N)
-    err = np.empty(N)
-    for i in range(N):
-        s = y[i]
-        e = 0.0
-        for q in range(4):
-            s += _B[q] * K[q, i]
-            e += (_B[q] - _B_HAT[q]) * K[q, i]
-        y1[i] = s
-        err[i] = e
+    y1, err = _solution(y, K)
+    return y1, err, True
+
+
+@njit(cache=True)
+def step_terms(P, y, f, h, jac, K):
+    """:func:`step` with the stiff Jacobian as the terms of :func:`terms`, in O(n r).
+
+    Solves the reduced system times M, ``(M + hg C + hg^2 K) v = h M f_v - h
+    (K u_x + C u_v) - hg K r_x`` (u the stage's Jacobian-product argument, r_x
+    = h (f_x + u_v)), by :func:`_w_factor`, its ``M f_v`` by
+    :func:`articulated.times`: the same as :func:`step` with ``A = -M^-1 K``,
+    ``B = -M^-1 C``, to round-off (test_dynamics_articulated).
+    """
+    S, I6, Kd, Cd, U, kk, cc = jac
+    n = P.n
+    N = y.shape[0]
+    hg = h * GAMMA
+    UA, D, Z, wq, LU, piv, ok = _w_factor(P, hg, S, I6, Kd, Cd, U, kk, cc)
+    if not ok:
+        return y.copy(), np.full(N, np.inf), False
+    yi = np.empty(N)
+    rx = np.empty(n)
+    u = np.zeros(N)
+    work6 = np.empty((2, n + 1, 6))
+    g = np.empty(n)
+    kx = np.empty(n)
+    proj = np.empty(U.shape[0])
+    yq = np.empty(U.shape[0])
+    for st in range(4):
+        fi = f
+        if st > 0:  # u stays zero at stage 0
+            _stage_state(y, K, st, yi)
+            fi = kernels.rhs(P, yi)
+            _stage_argument(K, st, u)
+        z = K[st]
+        articulated.times(P, S, I6, fi[n:2 * n], g, work6)
+        for i in range(n):
+            g[i] *= h
+            rx[i] = h * (fi[i] + u[n + i])
+            kx[i] = h * u[i] + hg * rx[i]
+        _add_stiff(Kd, U, kk, kx, -1.0, g, proj)
+        _add_stiff(Cd, U, cc, u[n:2 * n], -h, g, proj)
+        v = z[n:2 * n]
+        articulated.solve(P, S, UA, D, g, v, work6[0])
+        for q in range(U.shape[0]):
+            s = 0.0
+            for i in range(n):
+                s += U[q, i] * v[i]
+            proj[q] = wq[q] * s
+        lu_solve(LU, piv, proj, yq)
+        for q in range(U.shape[0]):
+            c = yq[q]
+            for i in range(n):
+                v[i] -= c * Z[q, i]
+        for i in range(n):
+            z[i] = rx[i] + hg * v[i]
+        for i in range(2 * n, N):
+            z[i] = h * fi[i]
+    y1, err = _solution(y, K)
     return y1, err, True

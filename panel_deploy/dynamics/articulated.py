@@ -1,0 +1,159 @@
+"""Mass-matrix operations in O(n) on the kinematic tree: Featherstone's
+articulated-body algorithm (ABA; "Rigid Body Dynamics Algorithms", ch. 7)
+as a factorisation of ``H = M + diag(armature)`` reused for many right-hand
+sides, and the product ``M x`` by one pass down and one up the tree.
+
+All spatial quantities are in the ground frame about its origin, angular part
+first, as in :mod:`.kernels`: the articulated inertias of a child and its
+parent then add without coordinate transforms. ``S`` (n, 6) are the joint
+screws of :func:`kernels.kinematics`, ``I6`` (n, 6, 6) the bodies' spatial
+inertias (:func:`inertias`), kg m^2, kg m, kg.
+
+The dense path (CRBA, Cholesky, LU of n x n matrices) costs O(n^3) per step;
+these are O(n) per solve. Below :data:`MIN_N` coordinates the dense path is
+as fast or faster (fixed costs of the 6 x 6 algebra against n^3 / 6 flops),
+so :func:`applies` keeps it there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .pack import EXACT
+
+#: Coordinates from which the O(n) path is taken. Measured, stiff Jacobian plus
+#: one ROS34PW2 step (3 rhs calls), compiled loops: 16 us dense against 20 us
+#: O(n) on the paper scene (11 coordinates), 40 against 33 us on the 5 x 6
+#: packing (26), 480 against 84 us on 10 x 10 (85).
+MIN_N = 20
+
+
+@njit(cache=True)
+def applies(method, n):
+    """Whether the rhs and the W-solves of a model (``Packed.method``, ``Packed.n``)
+    take the O(n) path: a tree or a penalty closure (whose cut forces are
+    wrenches like any other) of at least MIN_N coordinates. The exact closure
+    needs ``M^-1 J^T`` and keeps the dense path. (Scalars, not the Packed
+    tuple: passing that to a function costs a reference count per array.)"""
+    return method != EXACT and n >= MIN_N
+
+
+@njit(cache=True)
+def inertias(P, Jb, hb):
+    """Spatial inertias ``[[J, [h]x], [-[h]x, m 1]]`` (n, 6, 6) about the ground
+    origin from the angular inertias J (n, 3, 3, kg m^2) and first moments
+    h = m c (n, 3, kg m) of :func:`kernels.body_inertias`."""
+    n = P.n
+    out = np.zeros((n, 6, 6))
+    for i in range(n):
+        h0, h1, h2 = hb[i, 0], hb[i, 1], hb[i, 2]
+        m = P.mass[i]
+        for r in range(3):
+            for c in range(3):
+                out[i, r, c] = Jb[i, r, c]
+            out[i, 3 + r, 3 + r] = m
+        # [h]x in the upper right, its transpose -[h]x in the lower left
+        out[i, 0, 4] = -h2
+        out[i, 0, 5] = h1
+        out[i, 1, 3] = h2
+        out[i, 1, 5] = -h0
+        out[i, 2, 3] = -h1
+        out[i, 2, 4] = h0
+        for r in range(3):
+            for c in range(3):
+                out[i, 3 + r, c] = out[i, c, 3 + r]
+    return out
+
+
+@njit(cache=True)
+def factor(P, S, I6, armature):
+    """Factor ``H = M + diag(armature)`` (armature (n,), kg m^2) by the
+    articulated-body inertias, leaves first.
+
+    Returns (U, D, ok): ``U[i] = I^A_i S_i`` (n, 6) and ``D[i] = S_i . U[i] +
+    armature[i]`` (n,); ok is False if some D is not positive (H not positive
+    definite), as the Cholesky of the dense path fails.
+    """
+    n = P.n
+    IA = I6.copy()
+    U = np.empty((n, 6))
+    D = np.empty(n)
+    for i in range(n - 1, -1, -1):
+        d = armature[i]
+        for r in range(6):
+            s = 0.0
+            for c in range(6):
+                s += IA[i, r, c] * S[i, c]
+            U[i, r] = s
+            d += S[i, r] * s
+        if not d > 0.0:
+            return U, D, False
+        D[i] = d
+        a = P.parent[i]
+        if a < n:
+            inv = 1.0 / d
+            for r in range(6):
+                ur = U[i, r] * inv
+                for c in range(6):
+                    IA[a, r, c] += IA[i, r, c] - ur * U[i, c]
+    return U, D, True
+
+
+@njit(cache=True)
+def solve(P, S, U, D, tau, out, work):
+    """Write ``H^-1 tau`` to out (n,) from :func:`factor`'s (U, D); work is
+    (n + 1, 6) scratch. tau (n,) is not changed and may not be out."""
+    n = P.n
+    work[:] = 0.0
+    # up the tree: the articulated bias forces, out holds u_i meanwhile
+    for i in range(n - 1, -1, -1):
+        u = tau[i]
+        for k in range(6):
+            u -= S[i, k] * work[i, k]
+        out[i] = u
+        a = P.parent[i]
+        if a < n:
+            c = u / D[i]
+            for k in range(6):
+                work[a, k] += work[i, k] + U[i, k] * c
+    # down the tree: joint and body accelerations (the ground's row n stays 0)
+    work[:] = 0.0
+    for i in range(n):
+        a = P.parent[i]
+        x = out[i]
+        for k in range(6):
+            x -= U[i, k] * work[a, k]
+        x /= D[i]
+        out[i] = x
+        for k in range(6):
+            work[i, k] = work[a, k] + S[i, k] * x
+
+
+@njit(cache=True)
+def times(P, S, I6, x, out, work):
+    """Write ``M x`` to out (n,): body accelerations ``a_i = a_parent + S_i
+    x_i`` down the tree, their inertia forces summed up it and projected on the
+    joint screws. work is (2, n + 1, 6) scratch; x (n,) may not be out."""
+    n = P.n
+    a = work[0]
+    f = work[1]
+    a[n, :] = 0.0
+    f[:] = 0.0
+    for i in range(n):
+        b = P.parent[i]
+        for k in range(6):
+            a[i, k] = a[b, k] + S[i, k] * x[i]
+    for i in range(n - 1, -1, -1):
+        s = 0.0
+        for r in range(6):
+            v = f[i, r]
+            for c in range(6):
+                v += I6[i, r, c] * a[i, c]
+            f[i, r] = v
+            s += S[i, r] * v
+        out[i] = s
+        b = P.parent[i]
+        if b < n:
+            for r in range(6):
+                f[b, r] += f[i, r]

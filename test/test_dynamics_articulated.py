@@ -1,0 +1,157 @@
+"""The O(n) path (articulated-body algorithm, structured W-solve) against the
+dense one (CRBA mass matrix, numpy solves, dense Jacobian blocks): a random
+branched tree with hinges in contact, and the penalty-closed 5 x 6 packing of
+issue 33 (26 coordinates, one cut hinge)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from panel_deploy.build import build_model
+from panel_deploy.dynamics import articulated, kernels, rosenbrock, simulate
+from panel_deploy.dynamics.pack import PENALTY, TREE, pack
+from panel_deploy.model import AirParameters, Body, Model, State, box_inertia
+from panel_deploy.scene import SimulationSection, load_scene
+
+from test_dynamics_helpers import SIZE, hinge
+
+SCENE = Path(__file__).resolve().parent.parent / "config" / "scenes" / "paper_4x4.yaml"
+
+
+def random_tree(n=24, seed=0):
+    """n + 1 bodies, each hinged to a random earlier one (a branched tree), random
+    inertia, gravity and air."""
+    rng = np.random.default_rng(seed)
+    bodies = []
+    for i in range(n + 1):
+        m = rng.uniform(0.01, 0.05)
+        X = rng.normal(size=(3, 3))
+        bodies.append(Body(f"b{i}", (), SIZE.copy(), m, box_inertia(m, SIZE) + 1e-6 * X @ X.T,
+                           rng.uniform(-0.3, 0.3, 3)))
+    hinges = [hinge(f"h{i}", int(rng.integers(0, i)), i, rng.uniform(-0.3, 0.3, 3),
+                    rng.normal(size=3), k=rng.uniform(0.05, 0.2), c=rng.uniform(0.001, 0.01))
+              for i in range(1, n + 1)]
+    return Model.build(bodies, hinges, 0, k_s=500.0, c_s=0.3, gravity=(0.3, -9.81, 1.0),
+                       air=AirParameters(1.2, 1.17))
+
+
+def packing_5x6():
+    """The 5 x 6 first packing circuit of bench/bench_scaling.py, penalty closure."""
+    sets = ["array.rows=5", "array.cols=6", "fold.circuit=3", "fold.ground=null"]
+    return build_model(load_scene(SCENE, sets))
+
+
+MODELS = {"tree": random_tree, "5x6": packing_5x6}
+
+
+@pytest.fixture(scope="module", params=list(MODELS))
+def model(request):
+    return MODELS[request.param]()
+
+
+def states(model, count, seed=1, spread=0.05):
+    """Near the stowed state (the loop closed), some tree hinges past a limit."""
+    rng = np.random.default_rng(seed)
+    stowed = State.stowed(model).theta
+    n = model.n_coords
+    for _ in range(count):
+        theta = stowed + rng.normal(0.0, spread, n)
+        yield np.concatenate([theta, rng.normal(0.0, 2.0, n), [0.0, 0.0]])
+
+
+def test_models_take_the_articulated_path(model):
+    P = pack(model)
+    assert articulated.applies(P.method, P.n)
+    assert P.method == (PENALTY if model.cut_hinges else TREE)
+
+
+def test_factor_solve_and_product_are_the_dense_ones(model):
+    P = pack(model)
+    n = P.n
+    rng = np.random.default_rng(2)
+    for y in states(model, 3):
+        M, _, (R, p, _, _, S), *_ = kernels.mass_and_bias(P, y[:n], y[n:2 * n])
+        I6 = articulated.inertias(P, *kernels.body_inertias(P, R, p))
+        arm = rng.uniform(0.0, 2.0, n) * np.diag(M)
+        U, D, ok = articulated.factor(P, S, I6, arm)
+        assert ok
+        tau = rng.normal(size=n)
+        x = np.empty(n)
+        articulated.solve(P, S, U, D, tau, x, np.empty((n + 1, 6)))
+        ref = np.linalg.solve(M + np.diag(arm), tau)
+        assert np.abs(x - ref).max() < 1e-10 * np.abs(ref).max()
+        out = np.empty(n)
+        articulated.times(P, S, I6, tau, out, np.empty((2, n + 1, 6)))
+        assert np.abs(out - M @ tau).max() < 1e-12 * np.abs(M).max() * np.abs(tau).max()
+
+
+def test_factor_reports_a_singular_mass_matrix():
+    model = random_tree(n=20)
+    P = pack(model)._replace(mass=np.zeros(20), inertia=np.zeros((20, 3, 3)))
+    y = next(states(model, 1))
+    assert np.all(np.isnan(kernels.rhs(P, y)))
+
+
+def test_rhs_is_the_dense_solve(model):
+    """The ABA forward dynamics against ``M^-1 Q`` from the CRBA mass matrix, with
+    the dissipation and the closure work rows unchanged."""
+    P = pack(model)
+    n = P.n
+    for y in states(model, 4):
+        M, Q, *_, dissipation, _ = kernels.mass_and_bias(P, y[:n], y[n:2 * n])
+        f = kernels.rhs(P, y)
+        qdd = np.linalg.solve(M, Q)
+        assert np.abs(f[n:2 * n] - qdd).max() < 1e-10 * np.abs(qdd).max()
+        assert np.array_equal(f[:n], y[n:2 * n])
+        assert f[2 * n] == dissipation and f[2 * n + 1] == 0.0
+
+
+@pytest.mark.parametrize("h", [1e-5, 1e-4, 1e-3])
+def test_structured_w_step_is_the_dense_step(model, h):
+    """One ROS34PW2 step with the O(n) W-solve against the step with the dense blocks
+    A = -M^-1 K, B = -M^-1 C of the same K, C (kernels.stiff_jacobian)."""
+    P = pack(model)
+    N = 2 * P.n + 2
+    for y in states(model, 3):
+        f = kernels.rhs(P, y)
+        A, B, ok = kernels.stiff_jacobian(P, y)
+        assert ok
+        y_dense, e_dense, ok_dense = rosenbrock.step(P, y, f, h, A, B, np.empty((7, N)))
+        y_aba, e_aba, ok_aba = rosenbrock.step_terms(P, y, f, h, rosenbrock.terms(P, y),
+                                                     np.empty((7, N)))
+        assert ok_dense and ok_aba
+        # the error estimate is a difference of stages: its round-off scales with the step
+        scale = np.abs(y_dense - y).max()
+        assert np.abs(y_aba - y_dense).max() < 1e-9 * scale
+        assert np.abs(e_aba - e_dense).max() < 1e-9 * scale
+        assert np.abs(e_dense).max() > 1e-6 * scale
+
+
+def dense_rhs(P):
+    """The deployment ODE with the dense mass-matrix solve, for scipy."""
+    n = P.n
+
+    def fun(t, y):
+        M, Q, *_, dissipation, _ = kernels.mass_and_bias(P, y[:n], y[n:2 * n])
+        return np.concatenate([y[n:2 * n], np.linalg.solve(M, Q), [dissipation, 0.0]])
+    return fun
+
+
+def test_short_simulation_follows_the_dense_reference(model):
+    """ROS34PW2 on the O(n) path against DOP853 on the dense ODE, 10 ms from a
+    perturbed stowed state (both well inside their tolerances of each other)."""
+    P = pack(model)
+    n = P.n
+    y0 = next(states(model, 1, seed=5, spread=0.02))
+    y0[n:2 * n] *= 0.1
+    t = np.linspace(0.0, 0.01, 11)
+    ref = solve_ivp(dense_rhs(P), (0.0, 0.01), y0, method="DOP853", t_eval=t, rtol=1e-10, atol=1e-12)
+    assert ref.success
+    r = simulate(model, SimulationSection(t_end=0.01, method="ros34pw2", rtol=1e-7, atol=1e-9,
+                                          samples=11), State(0.0, y0[:n], y0[n:2 * n]))
+    assert r.success, r.message
+    moved = np.abs(ref.y[:n, -1] - y0[:n]).max()
+    assert moved > 1e-4
+    assert np.abs(r.theta - ref.y[:n].T).max() < 1e-5 * moved

@@ -774,13 +774,31 @@ def _contact_law(depth, speed, k, c):
     return max(0.0, spring + damping * speed), spring, energy, stiffness, damping
 
 
-@njit(cache=True)
-def _pair_points(P, contact, r, R, p, work, reach):
-    """Contact points of pair r of ``P.contact`` (:func:`boxes.contact`): their
-    number (those deeper than -reach, m) and the normal from the pair's first
-    body towards its second; points and depths are left in work."""
+@njit(cache=True, inline='always')
+def _pair_apart(contact, r, R, p):
+    """Whether the axis-aligned boxes around pair r of ``P.contact`` are apart:
+    the test that spares most pairs of a large array the separating axes and
+    the call (scalar indexing only; array views and the work tuple cost a
+    pair more than the test)."""
     a, b = int(contact[r, 0]), int(contact[r, 1])
-    return contact_of_boxes(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], work, reach)
+    for i in range(3):
+        ea = (abs(R[a, i, 0]) * contact[r, 2] + abs(R[a, i, 1]) * contact[r, 3]
+              + abs(R[a, i, 2]) * contact[r, 4])
+        eb = (abs(R[b, i, 0]) * contact[r, 5] + abs(R[b, i, 1]) * contact[r, 6]
+              + abs(R[b, i, 2]) * contact[r, 7])
+        if abs(p[b, i] - p[a, i]) > ea + eb:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _pair_points(P, contact, r, R, p, work):
+    """Contact points of pair r of ``P.contact`` (:func:`boxes.contact`): their
+    number and the normal from the pair's first body towards its second;
+    points and depths are left in work; callers first skip the pairs
+    :func:`_pair_apart` rules out."""
+    a, b = int(contact[r, 0]), int(contact[r, 1])
+    return contact_of_boxes(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], work, 0.0)
 
 
 @njit(cache=True)
@@ -807,7 +825,9 @@ def panel_contacts(P, contact, R, p, w, vo, f):
     work = box_scratch()
     points, depths = work[-2], work[-1]
     for r in range(contact.shape[0]):
-        count, normal = _pair_points(P, contact, r, R, p, work, 0.0)
+        if _pair_apart(contact, r, R, p):
+            continue
+        count, normal = _pair_points(P, contact, r, R, p, work)
         a, b = int(contact[r, 0]), int(contact[r, 1])
         k, c = contact[r, 8], contact[r, 9]
         for q in range(count):
@@ -1038,7 +1058,9 @@ def _pressed_points(P, contact, R, p):
     depths = work[-1]
     count = 0
     for r in range(contact.shape[0]):
-        found, _ = _pair_points(P, contact, r, R, p, work, 0.0)
+        if _pair_apart(contact, r, R, p):
+            continue
+        found, _ = _pair_points(P, contact, r, R, p, work)
         for q in range(found):
             count += depths[q] > 0.0
     return count
@@ -1056,7 +1078,9 @@ def _contact_rows(P, contact, R, p, S, U, kk, cc, start):
     points, depths = work[-2], work[-1]
     row = start
     for r in range(contact.shape[0]):
-        found, normal = _pair_points(P, contact, r, R, p, work, 0.0)
+        if _pair_apart(contact, r, R, p):
+            continue
+        found, normal = _pair_points(P, contact, r, R, p, work)
         for q in range(found):
             if depths[q] <= 0.0:
                 continue

@@ -1,4 +1,4 @@
-"""Panels that touch in the stowed stacks, which get a contact between them.
+"""Which panels get a contact between them: the panels of the stowed stacks.
 
 In the stowed package every panel lies on the one below it, and the two
 stacks stand side by side, so many panels that share no hinge touch: face on
@@ -6,21 +6,28 @@ face between layers, side on side within a layer, edge on edge across the
 stacks. When the springs release the package these panels push on each
 other; without a contact between them the dynamics let them pass through
 each other (on 6 x 6 and larger arrays every first packing circuit did,
-within 0.02-0.06 s). :func:`stowed_contacts` finds those pairs; their
-contact (compliant, normal, one point per pair where their boxes overlap)
-is :func:`panel_deploy.dynamics.kernels.panel_contacts`.
+within 0.02-0.06 s). :func:`stowed_contacts` lists the pairs; their
+contact (compliant, normal, at the corners of the overlap of the two boxes'
+facing features) is :func:`panel_deploy.dynamics.kernels.panel_contacts`.
 
 The rule that separates pressing from collision (see
-:mod:`panel_deploy.collision.monitor`): a collision is interference deeper
-than ``collision.tolerance`` (0.1 mm by default). The contact's stiffness
-``contact.k_p`` is chosen so that pressing stays far within it (1e6 N/m: 1 um
-per newton), while an impact at the speeds of a deployment still goes
-deeper (a 0.02 kg panel at 1 m/s: about 0.14 mm), so a collision is an
-impact the model could not stop within the tolerance. Only pairs that touch
-in the stowed state get a contact: elsewhere the panels of a deployment
-approach each other only in an impact, which the collision check is there
-to find, and contact terms for them would cost every step (the mission:
-leave out what a scene does not need).
+:mod:`panel_deploy.collision.monitor`) is the check's own: a collision is
+interference deeper than ``collision.tolerance`` (0.1 mm by default). With
+``contact.k_p`` = 1e6 N/m a press costs 1 um per newton, so pressing stays
+far within it; what goes deeper is an impact the contact could not stop
+within the tolerance (a lone 0.02 kg panel from about 0.7 m/s, a chain of
+them from less) or a press it could not hold (a jam against the hinge
+stops). Either way the collision report says when the verdict on a press
+depends on k_p (:func:`panel_deploy.collision.check.compliance_note`).
+
+Which pairs: those within ``contact.reach`` of each other in the stowed
+stacks, by default two thicknesses (a panel two layers away meets its
+neighbour once the layer between has slid out). Not every pair: a contact
+stops an impact within the tolerance too, and on the paper scene with
+every pair in contact its 4.2 m/s impact of L2 into L1 (0.416 s) stayed
+within it and went unreported. So pairs further apart meet as collisions,
+as in the paper, and an impact between two near pairs counts only when it
+goes deeper than the tolerance (docs/findings.md 3.2).
 """
 
 from __future__ import annotations

@@ -334,8 +334,8 @@ class ContactSection:
     c_p: float = spec(280.0, number(0.0, 1e8, why=_WHY_STIFF), "N s/m",
                       "normal damping of one panel-to-panel contact")
     reach: Any = spec(None, optional(number(0.0, 100.0)), "m",
-                      "only unhinged panels this close in the stowed stacks get a contact "
-                      "(default: every unhinged pair)")
+                      "unhinged panels this close in the stowed stacks get a contact "
+                      "(default: two panel thicknesses)")
 
 
 @dataclass(frozen=True)

@@ -87,16 +87,18 @@ def paper_model(*sets):
     return build_model(load_scene(PAPER, ["contact.panels=true", *sets]))
 
 
-def test_the_stowed_pairs_are_the_unhinged_pairs_within_reach():
-    """By default the pairs at most two thicknesses apart in the stowed stacks
-    (a panel two layers away), or those that touch with reach 0."""
+def test_the_contact_pairs_are_the_unhinged_pairs_within_reach():
+    """The pairs at most contact.reach apart in the stowed stacks (default
+    two thicknesses; 0: those that touch; far: every unhinged pair)."""
     model = paper_model()
+    assert paper_model("contact.reach=10").contact_pairs == model.collision_pairs
     R, p = forward_kinematics(model, model.theta_stowed)
     distance = {(a, b): box_signed_distance(R[a], p[a], model.bodies[a].size / 2,
                                             R[b], p[b], model.bodies[b].size / 2)
                 for a, b in model.collision_pairs}
     t = model.bodies[0].size[2]
     assert set(model.contact_pairs) == {k for k, d in distance.items() if d <= 2 * t + 1e-9}
+    assert len(model.contact_pairs) == 37
     touching = {k for k, d in distance.items() if abs(d) <= 1e-9}
     assert len(touching) == 10 and set(paper_model("contact.reach=0").contact_pairs) == touching
     assert stowed_contacts(model) == paper_model("contact.reach=0").contact_pairs

@@ -754,7 +754,7 @@ def air_drag(P, air, R, p, w, vo, f):
 #: stiffness grow from zero at first touch. A contact in full at once makes
 #: the push (and the Jacobian) jump, and a step across it must shrink to
 #: where the jump no longer matters. Far below the depth of a press that
-#: carries more than a fraction of a newton (1 um per N at k_p = 1e6 N/m).
+#: carries more than a newton (1 um per N at k_p = 1e6 N/m).
 CONTACT_RAMP = 1e-5
 
 

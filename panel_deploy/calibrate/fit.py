@@ -85,6 +85,11 @@ class CalibrationResult:
     iterations, simulations : int
     wall_time : float
         s.
+    seconds : dict
+        Where ``wall_time`` went, s: ``"residuals"`` and ``"jacobian"``
+        the simulations of the points tried and of the difference steps
+        (:attr:`.residuals.Residuals.seconds`), ``"other"`` the rest (the
+        residuals from the simulations, the trust-region steps, the intervals).
     """
 
     success: bool
@@ -104,6 +109,7 @@ class CalibrationResult:
     iterations: int
     simulations: int
     wall_time: float
+    seconds: dict
 
     @property
     def samples(self) -> int:
@@ -182,8 +188,10 @@ def calibrate(parameters: Parameters, runs, simulation, *, noise: float = 0.0,
         status = 0 if fit.status > 0 else 1
         message = (fit.message if fit.status > 0
                    else f"the budget of {max_evaluations} evaluations ran out before convergence")
-        # least_squares hands back the Jacobian at its result: no more simulations.
-        unc = uncertainty(fit.jac, r, x, (*names, *(f"release[{i}]" for i in range(len(runs)))),
+        # least_squares hands back the forward-difference Jacobian at its
+        # result; one step back per value makes it central (see Residuals.central).
+        unc = uncertainty(residuals.central(x, fit.jac), r, x,
+                          (*names, *(f"release[{i}]" for i in range(len(runs)))),
                           [True] * len(names) + [False] * len(runs))
     except KeyboardInterrupt:
         x = residuals.best[1] if residuals.best[1] is not None else x0
@@ -194,6 +202,7 @@ def calibrate(parameters: Parameters, runs, simulation, *, noise: float = 0.0,
         message += (f"; {len(residuals.failures)} of {residuals.simulations} simulations "
                     f"failed (first: {residuals.failures[0]})")
     fitted, offs = residuals.split(x)
+    wall_time = time.perf_counter() - start_clock
     values = np.array([fitted[names.index(n)] if n in names else start
                        for n, start in zip(parameters.names, parameters.start)])
     return CalibrationResult(
@@ -201,7 +210,8 @@ def calibrate(parameters: Parameters, runs, simulation, *, noise: float = 0.0,
         values=values, held=held, offsets=offs, x=np.asarray(x), cost=0.5 * float(r @ r),
         noise=noise, uncertainty=unc, rms=residuals.per_hinge_rms(x), model=free.model_at(fitted),
         residuals=residuals, iterations=iterations[0],
-        simulations=residuals.simulations, wall_time=time.perf_counter() - start_clock)
+        simulations=residuals.simulations, wall_time=wall_time,
+        seconds={**residuals.seconds, "other": wall_time - sum(residuals.seconds.values())})
 
 
 def _unmoved(parameters: Parameters, runs, threshold: float) -> dict:

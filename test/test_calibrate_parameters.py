@@ -94,6 +94,18 @@ def test_the_intervals_come_from_central_differences_and_the_time_is_accounted_f
     assert set(result.seconds) == {"residuals", "jacobian", "other"}
     assert min(result.seconds.values()) >= 0.0
     assert sum(result.seconds.values()) == pytest.approx(result.wall_time, rel=1e-9)
+    assert not any("does not follow the data" in w for w in result.warnings)
+
+
+def test_residuals_far_above_the_noise_are_warned_of():
+    """Encoders 10 mrad off zero: what no damping or drag can fit."""
+    air = scene("air.density=1.2")
+    fitted = parameters(build_model(air), ("damping", "drag"))
+    data = measured(fitted.model_at([1.3, 1.6]), air.simulation, seed=3)
+    biased = Measured(data.path, data.hinges, data.t, data.theta + 0.01, 0.0)
+    result = calibrate(fitted, [biased], air.simulation, noise=1e-3)
+    assert result.residual_rms > 5e-3
+    assert any("does not follow the data" in w for w in result.warnings)
 
 
 def test_drag_in_air_too_thin_to_act_is_reported_not_identifiable():

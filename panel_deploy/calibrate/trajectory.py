@@ -28,11 +28,12 @@ SAMPLE_INTERVAL = 1e-3
 FIT_RTOL = 1e-6
 
 
-def fit_settings(simulation, t_end: float):
+def fit_settings(simulation, t_end: float, sample_interval: float = SAMPLE_INTERVAL):
     """The scene's ``simulation`` section for a fit's run to ``t_end`` (s):
-    dense samples and a tolerance no looser than :data:`FIT_RTOL`."""
+    samples at most ``sample_interval`` (s) apart and a tolerance no looser
+    than :data:`FIT_RTOL`."""
     rtol = min(simulation.rtol, FIT_RTOL)
-    return replace(simulation, t_end=t_end, samples=max(3, math.ceil(t_end / SAMPLE_INTERVAL) + 1),
+    return replace(simulation, t_end=t_end, samples=max(3, math.ceil(t_end / sample_interval) + 1),
                    rtol=rtol, atol=min(simulation.atol, rtol * 1e-2))
 
 
@@ -66,18 +67,19 @@ class Trajectory:
         return out
 
 
-def simulate_hinges(model: Model, simulation, t_end: float, hinges) -> Trajectory:
+def simulate_hinges(model: Model, simulation, t_end: float, hinges,
+                    sample_interval: float = SAMPLE_INTERVAL) -> Trajectory:
     """Simulate ``model`` from stowed to ``t_end`` (s) with the scene's
-    ``simulation`` section (:func:`fit_settings`) and interpolate the angles
-    of the hinges named ``hinges``."""
-    result = simulate(model, fit_settings(simulation, t_end))
+    ``simulation`` section (:func:`fit_settings`, samples ``sample_interval``
+    s apart at most) and interpolate the angles of the hinges named ``hinges``."""
+    result = simulate(model, fit_settings(simulation, t_end, sample_interval))
     order = hinge_order(model)
     column = {model.hinges[h].name: i for i, h in enumerate(order)}
     cols = [column[name] for name in hinges]
     stowed = np.array([model.hinges[order[i]].theta_stowed for i in cols])
     status = (result.success, int(result.status), result.message)
     if len(result.t) < 2:  # failed at the first step: the array never left the stowed state
-        still = CubicHermiteSpline([0.0, SAMPLE_INTERVAL], [stowed, stowed],
+        still = CubicHermiteSpline([0.0, sample_interval], [stowed, stowed],
                                    np.zeros((2, len(cols))), axis=0)
         return Trajectory(stowed, still, 0.0, *status)
     theta = np.hstack([result.theta, result.cut_theta])[:, cols]

@@ -20,7 +20,8 @@ from scipy.spatial.transform import Rotation
 from panel_deploy import fold
 from panel_deploy.build import build_model
 from panel_deploy.collision import CollisionMonitor, CollisionSettings, check_trajectory
-from panel_deploy.collision.geometry import (CERTIFY_TOL, BoxSet, _clamp_to_box, _corners, _edge_gaps, _EDGES,
+from panel_deploy.boxes import corners
+from panel_deploy.collision.geometry import (CERTIFY_TOL, BoxSet, _clamp_to_box, _edge_gaps, _EDGES,
                                              box_distance, box_signed_distance, corner_bound, least_overlap,
                                              pair_bounds)
 from panel_deploy.collision.monitor import _segment
@@ -49,7 +50,7 @@ def test_edge_gaps_bound_every_point_of_the_edge_from_the_other_box():
     # box_distance skips an edge pair when an edge's gap exceeds the best
     # candidate: the gap must not exceed any point's distance from the box.
     for ha, Ra, ca, hb, Rb, cb in separated_pairs(np.random.default_rng(7))[::3]:
-        va = _corners(Ra, ca, ha)
+        va = corners(Ra, ca, ha)
         q = np.empty(3)
         gaps = _edge_gaps(np.array([_clamp_to_box(v, Rb, cb, hb, q) for v in va]), hb)
         for e, (i, j) in enumerate(_EDGES):

@@ -104,20 +104,6 @@ def least_overlap(Ra, ca, ha, Rb, cb, hb, stop_below=-np.inf):
 
 
 @njit(cache=True)
-def aabb_apart(Ra, ca, ha, Rb, cb, hb, reach):
-    """Whether the axis-aligned boxes around boxes a and b are more than
-    ``reach`` (m) apart along a frame axis: the contact model's cheap test
-    before the separating axes (for thin panels stacked in layers far
-    tighter than their circumscribed spheres)."""
-    for i in range(3):
-        ea = abs(Ra[i, 0]) * ha[0] + abs(Ra[i, 1]) * ha[1] + abs(Ra[i, 2]) * ha[2]
-        eb = abs(Rb[i, 0]) * hb[0] + abs(Rb[i, 1]) * hb[1] + abs(Rb[i, 2]) * hb[2]
-        if abs(cb[i] - ca[i]) - ea - eb > reach:
-            return True
-    return False
-
-
-@njit(cache=True)
 def _feature(V, n, sign, eps, out):
     """Write to out the corners of V (8, 3) within eps of the largest sign * (n . v);
     returns their number and that extreme, m."""
@@ -264,7 +250,7 @@ def scratch():
 
 
 @njit(cache=True)
-def contact(Ra, ca, ha, Rb, cb, hb, work, reach=0.0):
+def contact(Ra, ca, ha, Rb, cb, hb, work):
     """Where and how deep boxes a and b (given as in :func:`separation`) interfere.
 
     The separating-axis test gives the normal n (from a towards b) of least
@@ -277,16 +263,13 @@ def contact(Ra, ca, ha, Rb, cb, hb, work, reach=0.0):
     so a tilted face presses deeper at one edge; the point itself is half
     way between the two.
 
-    Returns ``(count, normal)``: the number of points whose depth exceeds
-    ``-reach`` (m; 0 when the separating-axis test finds the boxes more than
-    ``reach`` apart) and n (a 3-tuple). The points (m) and their depths (m)
-    are ``work[-2][:count]`` and ``work[-1][:count]``; ``work`` is
-    :func:`scratch`.
+    Returns ``(count, normal)``: the number of points that interfere (0 when
+    the separating-axis test finds the boxes apart) and n (a 3-tuple). The
+    points (m) and their depths (m, > 0) are ``work[-2][:count]`` and
+    ``work[-1][:count]``; ``work`` is :func:`scratch`.
     """
-    if aabb_apart(Ra, ca, ha, Rb, cb, hb, reach):
-        return 0, (0.0, 0.0, 0.0)
-    depth, axis, along = least_overlap(Ra, ca, ha, Rb, cb, hb, -reach)
-    if depth <= -reach:
+    depth, axis, along = least_overlap(Ra, ca, ha, Rb, cb, hb, 0.0)
+    if depth <= 0.0:
         return 0, (0.0, 0.0, 0.0)
     s = 1.0 if along >= 0.0 else -1.0
     n = (s * axis[0], s * axis[1], s * axis[2])
@@ -309,7 +292,7 @@ def contact(Ra, ca, ha, Rb, cb, hb, work, reach=0.0):
     for q in range(found):
         x, y = corners2[q, 0], corners2[q, 1]
         top, bottom = _height(A, ma, x, y), _height(B, mb, x, y)
-        if top - bottom <= -reach:
+        if top - bottom <= 0.0:
             continue
         z = 0.5 * (top + bottom)
         for m in range(3):

@@ -13,8 +13,9 @@ facing features) is :func:`panel_deploy.dynamics.kernels.panel_contacts`.
 The rule that separates pressing from collision (see
 :mod:`panel_deploy.collision.monitor`) is the check's own: a collision is
 interference deeper than ``collision.tolerance`` (0.1 mm by default). With
-``contact.k_p`` = 1e6 N/m a press costs 1 um per newton, so pressing stays
-far within it; what goes deeper is an impact the contact could not stop
+``contact.k_p`` = 1e6 N/m a face pressed with 5 N sits 10 um deep, a tenth
+of the tolerance, and 1 um deeper per newton beyond, so pressing stays far
+within it; what goes deeper is an impact the contact could not stop
 within the tolerance (a lone 0.02 kg panel from about 0.7 m/s, a chain of
 them from less) or a press it could not hold (a jam against the hinge
 stops). Either way the collision report says when the verdict on a press

@@ -241,7 +241,7 @@ class Model:
     air : AirParameters
         Air drag on the panel faces (default: none).
     contact_pairs : tuple of (int, int)
-        Unhinged body pairs that touch in the stowed stacks, i < j: the
+        Unhinged body pairs near each other in the stowed stacks, i < j: the
         panel contacts of :mod:`panel_deploy.contacts` (default: none).
     k_p, c_p : float
         Normal stiffness (N/m) and damping (N s/m) of a panel contact.

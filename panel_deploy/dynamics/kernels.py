@@ -753,8 +753,8 @@ def air_drag(P, air, R, p, w, vo, f):
 #: is k d^2 / (2 D) and the damping c d / D, so that the push and its
 #: stiffness grow from zero at first touch. A contact in full at once makes
 #: the push (and the Jacobian) jump, and a step across it must shrink to
-#: where the jump no longer matters. Far below the depth of a press that
-#: carries more than a newton (1 um per N at k_p = 1e6 N/m).
+#: where the jump no longer matters. A face pressed with up to 5 N (k_p =
+#: 1e6 N/m) sits on the ramp, a tenth of the collision tolerance deep at most.
 CONTACT_RAMP = 1e-5
 
 
@@ -798,7 +798,7 @@ def _pair_points(P, contact, r, R, p, work):
     points and depths are left in work; callers first skip the pairs
     :func:`_pair_apart` rules out."""
     a, b = int(contact[r, 0]), int(contact[r, 1])
-    return contact_of_boxes(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], work, 0.0)
+    return contact_of_boxes(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], work)
 
 
 @njit(cache=True)
@@ -832,8 +832,6 @@ def panel_contacts(P, contact, R, p, w, vo, f):
         k, c = contact[r, 8], contact[r, 9]
         for q in range(count):
             depth = depths[q]
-            if depth <= 0.0:
-                continue
             x = (points[q, 0], points[q, 1], points[q, 2])
             speed = _dot(normal, _sub(_point_velocity(w, vo, a, x), _point_velocity(w, vo, b, x)))
             push, spring, e, _, _ = _contact_law(depth, speed, k, c)
@@ -1055,14 +1053,11 @@ def _pressed_points(P, contact, R, p):
     if contact is None:
         return 0
     work = box_scratch()
-    depths = work[-1]
     count = 0
     for r in range(contact.shape[0]):
         if _pair_apart(contact, r, R, p):
             continue
-        found, _ = _pair_points(P, contact, r, R, p, work)
-        for q in range(found):
-            count += depths[q] > 0.0
+        count += _pair_points(P, contact, r, R, p, work)[0]
     return count
 
 
@@ -1082,8 +1077,6 @@ def _contact_rows(P, contact, R, p, S, U, kk, cc, start):
             continue
         found, normal = _pair_points(P, contact, r, R, p, work)
         for q in range(found):
-            if depths[q] <= 0.0:
-                continue
             _, _, _, k, c = _contact_law(depths[q], 0.0, contact[r, 8], contact[r, 9])
             kk[row], cc[row] = k, c
             x = (points[q, 0], points[q, 1], points[q, 2])

@@ -25,8 +25,9 @@ With ``A = -M^-1 K``, ``B = -M^-1 C`` and K, C diagonal plus rank r
 row per cut hinge and five more per penalty closure), that system times M is
 ``(M + h gamma C + h^2 gamma^2 K) v = ...``: the mass matrix plus a joint-space
 diagonal, which the articulated-body algorithm factors in O(n), plus rank r,
-added by the Woodbury identity: :func:`step_terms`, O(n r) per step with no
-n x n matrix formed, which the compiled loop takes where
+added by the Woodbury identity: :func:`step_terms`, O(n r^2) per step with no
+n x n matrix formed (for many rows, as a pressed stack's contact points, the
+n x n matrix formed and factored instead), which the compiled loop takes where
 :func:`articulated.applies`; else :func:`step` with the dense blocks, an
 n x n LU per step.
 """
@@ -144,30 +145,44 @@ def terms(P, y):
     return S, articulated.inertias(P, Jb, hb), Kd, Cd, U, kk, cc
 
 
+#: Rows of U per coordinate above which :func:`_w_factor` forms and factors the
+#: n x n matrix instead of the Woodbury capacitance: that costs ~r^2 n + r^3 / 3
+#: a step against ~n^3 / 3 + sum(nnz^2) for the dense one. The stowed stack of a
+#: 10 x 10 array presses up to ~240 contact points on 85 coordinates.
+DENSE_ROWS = 0.5
+
+
 @njit(cache=True)
 def _w_factor(P, hg, S, I6, Kd, Cd, U, kk, cc):
     """Factor ``M W = H + U^T diag(wq) U`` with ``H = M + diag(hg Cd + hg^2 Kd)``
-    (O(n) by :func:`articulated.factor`) and ``wq = hg cc + hg^2 kk``.
+    and ``wq = hg cc + hg^2 kk``.
 
-    Returns (UA, D, Z, wq, LU, piv, ok): the factor of H, ``Z = H^-1 U^T`` as
-    rows (r, n), and the LU of the Woodbury capacitance ``1 + diag(wq) U Z^T``
-    (r, r), in the form without ``diag(wq)^-1`` (a weight may be zero).
+    Returns (UA, D, Z, wq, LU, piv, dense, ok). With at most :data:`DENSE_ROWS`
+    rows per coordinate (dense False): the factor (UA, D) of H, O(n) by
+    :func:`articulated.factor`, ``Z = H^-1 U^T`` as rows (r, n), and the LU of
+    the Woodbury capacitance ``1 + diag(wq) U Z^T`` (r, r), in the form without
+    ``diag(wq)^-1`` (a weight may be zero). With more (dense True): the LU of
+    ``M W`` itself (n, n), by :func:`_w_dense`; UA, D, Z are then empty.
     """
     n = P.n
     r = U.shape[0]
     arm = np.empty(n)
     for i in range(n):
         arm[i] = hg * Cd[i] + hg * hg * Kd[i]
+    wq = np.empty(r)
+    for q in range(r):
+        wq[q] = hg * cc[q] + hg * hg * kk[q]
+    if r > DENSE_ROWS * n:
+        LU, piv, ok = _w_dense(P, arm, S, I6, U, wq)
+        return np.empty((0, 6)), np.empty(0), np.empty((0, n)), wq, LU, piv, True, ok
     UA, D, ok = articulated.factor(P, S, I6, arm)
     Z = np.empty((r, n))
-    wq = np.empty(r)
     cap = np.zeros((r, r))
     if not ok:
-        return UA, D, Z, wq, cap, np.arange(r), False
+        return UA, D, Z, wq, cap, np.arange(r), False, False
     work = np.empty((n + 1, 6))
     for q in range(r):
         articulated.solve(P, S, UA, D, U[q], Z[q], work)
-        wq[q] = hg * cc[q] + hg * hg * kk[q]
     for q in range(r):
         for c in range(r):
             s = 0.0
@@ -176,7 +191,51 @@ def _w_factor(P, hg, S, I6, Kd, Cd, U, kk, cc):
             cap[q, c] = wq[q] * s
         cap[q, q] += 1.0
     LU, piv, ok = lu_factor(cap)
-    return UA, D, Z, wq, LU, piv, ok
+    return UA, D, Z, wq, LU, piv, False, ok
+
+
+@njit(cache=True)
+def _w_dense(P, arm, S, I6, U, wq):
+    """LU of ``M + diag(arm) + U^T diag(wq) U`` (n, n): (LU, piv, ok). A contact
+    row is non-zero only on the paths from its two bodies to the root, so its
+    outer product costs nnz^2, not n^2."""
+    n = P.n
+    W = articulated.mass_matrix(P, S, I6)
+    for i in range(n):
+        W[i, i] += arm[i]
+    idx = np.empty(n, np.int64)
+    for q in range(U.shape[0]):
+        m = 0
+        for i in range(n):
+            if U[q, i] != 0.0:
+                idx[m] = i
+                m += 1
+        for a in range(m):
+            ua = wq[q] * U[q, idx[a]]
+            for b in range(m):
+                W[idx[a], idx[b]] += ua * U[q, idx[b]]
+    return lu_factor(W)
+
+
+@njit(cache=True)
+def _w_solve(P, S, factor, U, g, v, work, proj, yq):
+    """Write to v (n,) the solution of ``M W v = g`` from :func:`_w_factor`'s
+    factor; work (n + 1, 6), proj and yq (r,) are scratch."""
+    UA, D, Z, wq, LU, piv, dense, _ = factor
+    if dense:
+        lu_solve(LU, piv, g, v)
+        return
+    articulated.solve(P, S, UA, D, g, v, work)
+    for q in range(U.shape[0]):
+        s = 0.0
+        for i in range(v.shape[0]):
+            s += U[q, i] * v[i]
+        proj[q] = wq[q] * s
+    lu_solve(LU, piv, proj, yq)
+    for q in range(U.shape[0]):
+        c = yq[q]
+        for i in range(v.shape[0]):
+            v[i] -= c * Z[q, i]
 
 
 @njit(cache=True)
@@ -290,8 +349,8 @@ def step_terms(P, y, f, h, jac, K):
     n = P.n
     N = y.shape[0]
     hg = h * GAMMA
-    UA, D, Z, wq, LU, piv, ok = _w_factor(P, hg, S, I6, Kd, Cd, U, kk, cc)
-    if not ok:
+    factor = _w_factor(P, hg, S, I6, Kd, Cd, U, kk, cc)
+    if not factor[-1]:
         return y.copy(), np.full(N, np.inf), False
     yi = np.empty(N)
     rx = np.empty(n)
@@ -316,17 +375,7 @@ def step_terms(P, y, f, h, jac, K):
         _add_stiff(Kd, U, kk, kx, -1.0, g, proj)
         _add_stiff(Cd, U, cc, u[n:2 * n], -h, g, proj)
         v = z[n:2 * n]
-        articulated.solve(P, S, UA, D, g, v, work6[0])
-        for q in range(U.shape[0]):
-            s = 0.0
-            for i in range(n):
-                s += U[q, i] * v[i]
-            proj[q] = wq[q] * s
-        lu_solve(LU, piv, proj, yq)
-        for q in range(U.shape[0]):
-            c = yq[q]
-            for i in range(n):
-                v[i] -= c * Z[q, i]
+        _w_solve(P, S, factor, U, g, v, work6[0], proj, yq)
         for i in range(n):
             z[i] = rx[i] + hg * v[i]
         for i in range(2 * n, N):

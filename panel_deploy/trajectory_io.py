@@ -9,15 +9,17 @@ statement of units and column names, stored in every file as JSON text.
 Arrays: every per-sample array of :class:`~panel_deploy.dynamics.result.SimulationResult`
 under its own name (``t``, ``theta``, ``omega``, ``rotation``, ``position``,
 ``linear_velocity``, ``angular_velocity``, ``constraint_gap``,
-``closure_sigma_min``, ``cut_theta``), energies as ``energy_<kind>``, the
+``closure_sigma_min``, ``cut_theta``, ``contact_onsets``), energies as ``energy_<kind>``, the
 per-hinge ``stiffness`` and ``damping`` as simulated, the name arrays that
 label their columns (``joint_names``, ``cut_hinge_names``, ``hinge_names``,
 ``body_names``), ``scene_yaml`` (the scene as YAML text with the stiffnesses
 that ran), ``units`` and ``columns`` (JSON text), the run's ``success``,
 ``status``, ``message``, ``method``, ``scheme``, ``nfev``, ``njev``, ``nlu``,
 ``nsteps``, ``nswitches``, ``gap_limit``, ``wall_time``; ``format_version``.
-Files of version 2 (no name arrays, no ``damping``) still load: their columns
-are those of the stored scene's model.
+Files of version 2 (no name arrays, no ``damping``) and 3 (no
+``contact_onsets``: they load with none, so a check of them cannot see an
+impact that panel contact absorbed) still load; version 2's columns are those
+of the stored scene's model.
 """
 
 from __future__ import annotations
@@ -32,14 +34,15 @@ from typing import NamedTuple
 import numpy as np
 import yaml
 
-from .dynamics.result import PER_SAMPLE, SimulationResult, Status
+from .dynamics.result import ONSET_COLUMNS, PER_SAMPLE, SimulationResult, Status, no_onsets
 from .errors import SceneError, TrajectoryError, shown
 from .validate import foreign_file, load_yaml, yaml_problem
 
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 #: Versions :func:`load_trajectory` reads (2: the columns of ``theta``,
-#: ``omega`` and ``cut_theta`` unnamed, no ``damping``).
-READABLE_VERSIONS = (2, 3)
+#: ``omega`` and ``cut_theta`` unnamed, no ``damping``; 2 and 3: no
+#: ``contact_onsets``).
+READABLE_VERSIONS = (2, 3, 4)
 _ARRAYS = PER_SAMPLE
 #: The run's scalars: name -> kind (i integer, f number, U text, b bool).
 _SCALARS = {"success": "b", "status": "i", "message": "U", "method": "U", "scheme": "U",
@@ -51,6 +54,7 @@ _SCALARS = {"success": "b", "status": "i", "message": "U", "method": "U", "schem
 UNITS = {"t": "s", "theta": "rad", "omega": "rad/s", "rotation": "1", "position": "m",
          "linear_velocity": "m/s", "angular_velocity": "rad/s", "constraint_gap": "m",
          "closure_sigma_min": "1", "cut_theta": "rad", "energy_<kind>": "J",
+         "contact_onsets": "s, m/s, 1, m, m, m, 1, 1, 1 (by column)",
          "stiffness": "N m/rad", "damping": "N m s/rad", "gap_limit": "m", "wall_time": "s"}
 
 #: The name array that labels the columns of each array: axis 1 of a
@@ -120,7 +124,7 @@ def save_trajectory(path, result: SimulationResult, scene, model, flag: str = "-
 
 
 def load_trajectory(path) -> StoredTrajectory:
-    """Read a trajectory file (format version 2 or 3).
+    """Read a trajectory file (format version 2, 3 or 4).
 
     Raises
     ------
@@ -155,6 +159,8 @@ def load_trajectory(path) -> StoredTrajectory:
                               f"{', '.join(map(str, READABLE_VERSIONS))} (simulate it again "
                               "with this version's simulate --out)")
     named = (*COLUMNS.values(), "damping") if version >= 3 else ()
+    if version < 4:
+        data["contact_onsets"] = no_onsets(len(data["t"]) if "t" in data else 0)
     missing = [k for k in dict.fromkeys((*_ARRAYS, *_SCALARS, "scene_yaml", "stiffness", *named))
                if k not in data]
     if missing:
@@ -174,6 +180,11 @@ def load_trajectory(path) -> StoredTrajectory:
         if values is not None and values.shape != (len(model.hinges),):
             raise TrajectoryError(f"{path}: {name} has shape {values.shape}; the stored scene's "
                                   f"model has {len(model.hinges)} hinges")
+    pair = data["contact_onsets"][:, 2]
+    if np.any(pair >= len(model.contact_pairs)):
+        j = int(np.argmax(pair >= len(model.contact_pairs)))
+        raise TrajectoryError(f"{path}: contact_onsets[{j}, 2] = {pair[j]:g}: the stored scene's "
+                              f"model has {len(model.contact_pairs)} contact pairs")
     model = model.with_stiffness(stiffness, damping)  # version 2: c follows k, as it ran
     energy = {k[len("energy_"):]: v for k, v in data.items() if k.startswith("energy_")}
     run = {name: _scalar(path, data, name, kind) for name, kind in _SCALARS.items()}
@@ -286,12 +297,22 @@ def _check_arrays(path, data):
     theta = float_array("theta", 2)
     for name, ndim in (("omega", 2), ("rotation", 4), ("position", 3), ("linear_velocity", 3),
                        ("angular_velocity", 3), ("constraint_gap", 1), ("closure_sigma_min", 2),
-                       ("cut_theta", 2)):
+                       ("cut_theta", 2), ("contact_onsets", 2)):
         a = float_array(name, ndim)
         if len(a) != s:
             raise TrajectoryError(f"{path}: {name} has {len(a)} samples, t has {s}")
     if len(theta) != s:
         raise TrajectoryError(f"{path}: theta has {len(theta)} samples, t has {s}")
+    onsets = data["contact_onsets"]
+    if onsets.shape[1] != len(ONSET_COLUMNS):
+        raise TrajectoryError(f"{path}: contact_onsets has {onsets.shape[1]} columns, expected "
+                              f"{len(ONSET_COLUMNS)} ({', '.join(ONSET_COLUMNS)})")
+    speed, pair = onsets[:, 1], onsets[:, 2]
+    bad = ~((speed >= 0) & np.isfinite(speed) & (pair >= -1) & (pair == np.round(pair)))
+    if bad.any():
+        j = int(np.argmax(bad))
+        raise TrajectoryError(f"{path}: contact_onsets[{j}]: speed {speed[j]:g} and pair "
+                              f"{pair[j]:g}: expected a finite speed >= 0 and a pair index >= -1")
     if data["omega"].shape != theta.shape:
         raise TrajectoryError(f"{path}: omega has shape {data['omega'].shape}, theta "
                               f"{theta.shape}")

@@ -155,6 +155,15 @@ def test_a_panel_dropped_on_another_bounces_back_with_its_energy():
     total = sum(result.energy[k] for k in ("kinetic", "spring", "gravity", "dissipated"))
     assert np.ptp(total) < 1e-4 * total[0]
     assert result.energy["spring"].max() > 0.1 * total[0]  # the contact held the energy at a sample
+    # The integrator records the touch: its time, and the far corners' speed
+    # from the fall's energy, m g lever sin(theta_0) = I_hinge omega^2 / 2.
+    onset = result.contact_onsets[np.flatnonzero(result.contact_onsets[:, 2] >= 0)[0]]
+    assert onset[2] == 0 and result.t[touched[0] - 1] < onset[0] <= result.t[touched[0]]
+    m, lever = 0.02, 0.5
+    inertia = box_inertia(m, 2 * HALF)[1, 1] + m * lever ** 2
+    omega = math.sqrt(2 * m * 9.81 * lever * math.sin(2e-3) / inertia)
+    assert onset[1] == pytest.approx(omega * (lever + HALF[0]), rel=1e-2)
+    assert np.allclose(onset[6:9], [0.0, 0.0, 1.0], atol=1e-2)  # the face normal, g towards b
 
 
 @pytest.fixture(scope="module")
@@ -233,3 +242,34 @@ def test_a_press_says_which_compliance_its_verdict_depends_on():
     penalty = paper_model("contact.panels=false")  # the paper's loops close by penalty
     assert "--closure exact" in compliance_note(penalty, event(pair, 0.01))
     assert compliance_note(paper_model("contact.panels=false", "closure.method=exact"), event(pair, 0.01)) is None
+
+
+def test_an_impact_the_contact_absorbs_is_still_a_collision(tmp_path, capsys):
+    """Every unhinged pair of the paper scene in contact: L2 hits L1 at 0.416 s
+    (4.2 m/s without contact, docs/findings.md) and the contact stops it within
+    the tolerance. The integrator's onset makes it the first collision, the
+    same pair at the same time as the interference without contact, and a
+    trajectory file keeps it for ``collide``."""
+    from panel_deploy.cli import main
+    from panel_deploy.trajectory_io import load_trajectory, save_trajectory
+
+    sets = ["simulation.t_end=0.43", "simulation.samples=87"]
+    runs, reports = {}, {}
+    for on in ("true", "false"):
+        scene = load_scene(PAPER, sets + [f"contact.panels={on}", "contact.reach=10"])
+        model = build_model(scene)
+        runs[on] = scene, model, simulate(model, scene.simulation)
+        assert runs[on][2].success, runs[on][2].message
+        reports[on] = check_trajectory(model, runs[on][2])
+    hit, through = reports["true"].first_collision, reports["false"].first_collision
+    assert hit.impact and not through.impact
+    assert set(hit.names) == set(through.names) == {"r1c2+r1c3", "r2c2+r2c3"}
+    assert hit.t == pytest.approx(through.t, abs=2e-3) and hit.normal_speed > 3.0
+    assert hit.distance == 0.0 and reports["true"].note is None
+    scene, model, result = runs["true"]
+    save_trajectory(tmp_path / "hit.npz", result, scene, model)
+    stored = load_trajectory(tmp_path / "hit.npz")
+    again = check_trajectory(stored.model, stored.result).first_collision
+    assert again.impact and again.t == hit.t and again.names == hit.names
+    assert main(["collide", str(tmp_path / "hit.npz")]) == 0
+    assert "an impact that panel contact absorbed" in capsys.readouterr().out

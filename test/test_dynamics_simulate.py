@@ -257,7 +257,7 @@ def test_segment_size_is_checked(bad):
 def assert_same_run(blocks, whole):
     joined = concatenate(blocks)
     for name in PER_SAMPLE:
-        assert np.array_equal(getattr(joined, name), getattr(whole, name)), name
+        assert np.array_equal(getattr(joined, name), getattr(whole, name), equal_nan=True), name
     assert joined.energy.keys() == whole.energy.keys()
     for name in whole.energy:
         assert np.array_equal(joined.energy[name], whole.energy[name]), name

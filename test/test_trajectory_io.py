@@ -67,7 +67,7 @@ def _joint_states(mcap):
 def test_named_columns_are_the_recorded_joint_states_of_the_same_run(run):
     npz, mcap = run
     z = _numpy_only(npz)
-    assert int(z["format_version"]) == FORMAT_VERSION == 3
+    assert int(z["format_version"]) == FORMAT_VERSION == 4
     stamps, names, position, velocity = _joint_states(mcap)
     assert np.array_equal(stamps, np.round(z["t"] * 1e9).astype(np.int64))
     joints, cut = [str(x) for x in z["joint_names"]], [str(x) for x in z["cut_hinge_names"]]
@@ -179,7 +179,13 @@ def _rewrite(src, dst, **changes):
     (lambda z: {"cut_hinge_names": np.array([1.0])}, "cut_hinge_names: expected a 1-d array of text"),
     (lambda z: {"damping": z["damping"][:3]}, "damping has shape (3,); the stored scene's model has 12"),
     (lambda z: {"damping": np.full(12, np.nan)}, "damping[0] = nan: expected a finite number >= 0"),
-    (lambda z: {"format_version": np.array(4)}, "format_version 4, expected one of 2, 3"),
+    (lambda z: {"format_version": np.array(5)}, "format_version 5, expected one of 2, 3, 4"),
+    (lambda z: {"contact_onsets": z["contact_onsets"][:, :8]}, "contact_onsets has 8 columns, expected 9"),
+    (lambda z: {"contact_onsets": z["contact_onsets"][:-1]}, "contact_onsets has 120 samples, t has 121"),
+    (lambda z: {"contact_onsets": np.where(np.arange(9) == 1, np.nan, z["contact_onsets"])},
+     "contact_onsets[0]: speed nan and pair -1: expected a finite speed >= 0"),
+    (lambda z: {"contact_onsets": np.where(np.arange(9) == 2, 3.0, z["contact_onsets"])},
+     "contact_onsets[0, 2] = 3: the stored scene's model has 0 contact pairs"),
 ])
 def test_names_that_do_not_fit_the_stored_scene_are_one_line(run, tmp_path, capsys, change, expected):
     npz, _ = run
@@ -187,6 +193,17 @@ def test_names_that_do_not_fit_the_stored_scene_are_one_line(run, tmp_path, caps
     assert main(["collide", bad]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and expected in err[0], err
+
+
+def test_a_version_3_file_loads_without_contact_onsets(run, tmp_path):
+    npz, _ = run
+    data = _numpy_only(npz)
+    del data["contact_onsets"]
+    data["format_version"] = np.array(3)
+    np.savez_compressed(tmp_path / "v3.npz", **data)
+    stored = load_trajectory(tmp_path / "v3.npz")
+    assert stored.version == 3
+    assert np.all(stored.result.contact_onsets[:, 2] == -1) and len(stored.result.contact_onsets) == 121
 
 
 def test_a_version_3_file_without_its_names_is_refused(run, tmp_path, capsys):

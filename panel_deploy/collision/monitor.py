@@ -237,6 +237,11 @@ class CollisionEvent:
     refined : bool
         True if found between samples (D_j itself may show no interference:
         the panels passed through each other).
+    impact : bool
+        True for two panels in contact (``model.contact_pairs``) that came to
+        press at ``collision.check.PRESS_SPEED`` or faster: an impact the
+        contact absorbed, found by the integrator (``t`` its step's end,
+        ``distance`` 0); False for an interference deeper than the tolerance.
     """
 
     t: float
@@ -251,13 +256,14 @@ class CollisionEvent:
     approach_speed: float
     normal_speed: float
     refined: bool
+    impact: bool = False
 
     def to_dict(self) -> dict:
         return {"t": self.t, "contact_time": self.contact_time, "sample": self.sample,
                 "pair": list(self.names), "bodies": list(self.bodies), "distance": self.distance,
                 "point": self.point.tolist(), "normal": self.normal.tolist(),
                 "approach_speed": None if math.isnan(self.approach_speed) else self.approach_speed,
-                "normal_speed": self.normal_speed, "refined": self.refined}
+                "normal_speed": self.normal_speed, "refined": self.refined, "impact": self.impact}
 
 
 @dataclass

@@ -34,7 +34,7 @@ from numba import njit
 
 from ..errors import ModelError
 from . import articulated, kernels, rosenbrock
-from .result import Status
+from .result import Status, no_onsets
 
 #: scipy's implicit solvers: they get the analytic Jacobian.
 IMPLICIT = ("Radau", "BDF", "LSODA")
@@ -62,7 +62,9 @@ class Integration:
     ``y`` (s_done, N) holds the samples reached; ``status`` a
     :class:`~panel_deploy.dynamics.result.Status` (0 = t_end reached, negative
     = failure with ``message``); ``method`` the :data:`METHODS` entry that ran
-    ("dopri5" or "ros34pw2" for "compiled").
+    ("dopri5" or "ros34pw2" for "compiled"); ``onsets`` (s_done,
+    9) the fastest panel contact onset in each sample's interval
+    (:func:`record_onsets`).
     """
 
     y: np.ndarray
@@ -70,6 +72,7 @@ class Integration:
     message: str
     counters: Counters
     method: str
+    onsets: np.ndarray
 
 
 # --- work limits (shared by both integrators) ---
@@ -216,6 +219,26 @@ SCHEMES = {"dopri5": DOPRI5, "ros34pw2": ROS34PW2}
 ROS34PW2_TERMS = 2
 
 
+def onset_rows(P, y0, s):
+    """The per-sample onset records of a run from y0 with s samples, each
+    empty (no time, speed 0, pair -1), and the pressed flags of y0's contact
+    pairs: a pair pressing at the start has no onset."""
+    onsets = no_onsets(s)
+    pressed = np.zeros(0 if P.contact is None else len(P.contact), dtype=np.bool_)
+    kernels.contact_onsets(P, P.contact, y0, 0.0, pressed, no_onsets(1)[0])
+    return onsets, pressed
+
+
+@njit(cache=True)
+def record_onsets(P, y, t, t_eval, j, pressed, onsets):
+    """The contact onsets of the accepted step that ended at (t, y) into the
+    row of the sample interval (t_{k-1}, t_k] that holds t, given j, the next
+    sample to fill (:func:`kernels.contact_onsets`)."""
+    k = j - 1 if t <= t_eval[j - 1] else j
+    if k < t_eval.shape[0]:
+        kernels.contact_onsets(P, P.contact, y, t, pressed, onsets[k])
+
+
 def _compiled_loop(scheme):
     """The compiled loop of one scheme: ``loop(P, t_eval, Y, j, j_stop, carry,
     counts, rtol, atol, max_step, locate, max_steps, gap_limit)``.
@@ -267,8 +290,8 @@ def _compiled_loop(scheme):
     implicit = scheme == ROS34PW2 or structured
 
     @njit(cache=True)
-    def loop(P, t_eval, Y, j, j_stop, carry, counts, rtol, atol, max_step, locate,
-             max_steps, gap_limit):
+    def loop(P, t_eval, Y, onsets, pressed, j, j_stop, carry, counts, rtol, atol, max_step,
+             locate, max_steps, gap_limit):
         N = Y.shape[1]
         n = P.n
         s = t_eval.shape[0]
@@ -357,6 +380,7 @@ def _compiled_loop(scheme):
                     if lands:
                         Y[j] = y
                         j += 1
+                record_onsets(P, y, t, t_eval, j, pressed, onsets)
                 nsteps += 1
                 if gap_limit > 0.0 and max_gap(P, y) > gap_limit:
                     status, code = -1, 3
@@ -451,6 +475,7 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
     s, N = len(t_eval), len(y0)
     Y = np.full((s, N), np.nan)
     Y[0] = y0
+    onsets, pressed = onset_rows(P, y0, s)
     carry = np.zeros(2 + 2 * N)
     carry[0] = t_eval[0]
     carry[2:2 + N] = y0
@@ -462,8 +487,8 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
         if j <= stop:  # else ROS34PW2 filled this block already
             try:
                 j, status, code = loop(
-                    P, t_eval, Y, j, int(stop), carry, counts, settings.rtol, settings.atol,
-                    settings.max_step, settings.events, max_steps, gap_limit)
+                    P, t_eval, Y, onsets, pressed, j, int(stop), carry, counts, settings.rtol,
+                    settings.atol, settings.max_step, settings.events, max_steps, gap_limit)
             except ZeroDivisionError:  # numba's float division by an underflowed zero
                 status, code = -1, -Status.NON_FINITE
         message = _FAILURES.get(code, "")
@@ -473,7 +498,8 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
         msg = "reached t_end" if status == 0 else (
             f"{message} at t = {t_eval[done - 1]:.6g} s (last sample); integration stopped")
         total = Counters(*(int(c) for c in counts[:5]))
-        yield Integration(Y[lo:max(lo, hi)], status, msg, total.since(before), scheme)
+        yield Integration(Y[lo:max(lo, hi)], status, msg, total.since(before), scheme,
+                          onsets[lo:max(lo, hi)])
         before = total
         lo = max(lo, hi)
         if status != 0:
@@ -511,6 +537,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
 
     t_end = t_eval[-1]
     out = [y0]
+    onsets, pressed = onset_rows(P, y0, len(t_eval))
     j = 1
     lo = done = 0
     nsteps = nlu = nsw = 0
@@ -559,6 +586,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
             while j < len(t_eval) and t_eval[j] <= solver.t:
                 out.append(sol(t_eval[j]))
                 j += 1
+            record_onsets(P, solver.y, solver.t, t_eval, j, pressed, onsets)
             if gap_limit > 0 and max_gap(P, solver.y) > gap_limit:
                 status = Status.GAP_EXCEEDED
                 message = (f"loop-closure gap {max_gap(P, solver.y):.3g} m exceeded the limit "
@@ -576,7 +604,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
         hi = max(lo, min(stop + 1, done) if status == 0 else done)
         total = Counters(counts["nfev"], counts["njev"], nlu + getattr(solver, "nlu", 0), nsteps, nsw)
         block = np.array(out[lo:hi]).reshape(hi - lo, N)
-        yield Integration(block, status, message, total.since(before), name)
+        yield Integration(block, status, message, total.since(before), name, onsets[lo:hi])
         before, lo = total, hi
         if status != 0:
             return
@@ -636,7 +664,9 @@ def integrate_blocks(P, y0, t_eval, settings, max_steps, gap_limit, stops=None):
 
 def _not_started(y0, message, method):
     """The one block of a run that failed at its first sample."""
-    yield Integration(y0[None, :].copy(), Status.NON_FINITE, message, Counters(nfev=1), method)
+    yield Integration(y0[None, :].copy(), Status.NON_FINITE, message, Counters(nfev=1), method,
+                      no_onsets(1))
+
 
 
 @dataclass(frozen=True)

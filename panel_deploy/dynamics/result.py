@@ -80,6 +80,14 @@ class SimulationResult:
     cut_theta : (s, m) ndarray
         Angles of the m cut hinges, rad (they are not coordinates: computed
         from the body poses; empty second axis for a tree).
+    contact_onsets : (s, 9) ndarray (columns :data:`ONSET_COLUMNS`)
+        Row j: the fastest panel contact onset in (t_{j-1}, t_j] (a pair of
+        ``model.contact_pairs`` that came to press, found at the end of the
+        integrator's step): its time (s), approach speed along the normal
+        (m/s), the pair's index in ``model.contact_pairs``, the contact point
+        (m) and the normal (first body towards the second), ground frame;
+        time nan, speed 0 and index -1 where none (every row without panel
+        contacts). What tells an impact the contact absorbed from a press.
     success : bool
     status : Status
         0 (``Status.REACHED_T_END``), 1 stopped on request, or the negative
@@ -112,6 +120,7 @@ class SimulationResult:
     constraint_gap: np.ndarray
     closure_sigma_min: np.ndarray
     cut_theta: np.ndarray
+    contact_onsets: np.ndarray
     success: bool
     status: Status
     message: str
@@ -131,9 +140,23 @@ class SimulationResult:
         return replace(self, **per_sample, energy={k: v[:n] for k, v in self.energy.items()})
 
 
+#: The columns of ``SimulationResult.contact_onsets``: time (s), approach speed
+#: (m/s), index in ``Model.contact_pairs``, contact point (m), normal.
+ONSET_COLUMNS = ("t", "speed", "pair", "x", "y", "z", "nx", "ny", "nz")
+
+
+def no_onsets(s: int) -> np.ndarray:
+    """``contact_onsets`` of s samples without an onset: time nan, speed 0, pair -1."""
+    onsets = np.full((s, len(ONSET_COLUMNS)), np.nan)
+    onsets[:, 1] = 0.0
+    onsets[:, 2] = -1.0
+    return onsets
+
+
 #: The per-sample arrays of a :class:`SimulationResult` (first axis: samples).
 PER_SAMPLE = ("t", "theta", "omega", "rotation", "position", "linear_velocity",
-              "angular_velocity", "constraint_gap", "closure_sigma_min", "cut_theta")
+              "angular_velocity", "constraint_gap", "closure_sigma_min", "cut_theta",
+              "contact_onsets")
 
 
 def concatenate(blocks) -> SimulationResult:

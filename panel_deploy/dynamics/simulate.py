@@ -216,6 +216,7 @@ def _result(P, t, run, method, wall, gap_limit) -> SimulationResult:
         t=t, theta=Y[:, :n].copy(), omega=Y[:, n:2 * n].copy(),
         rotation=R, position=p, linear_velocity=v, angular_velocity=w,
         energy=energy, constraint_gap=gaps, closure_sigma_min=sigma, cut_theta=cut_theta,
+        contact_onsets=run.onsets,
         success=run.status == 0, status=run.status, message=run.message,
         **run.counters._asdict(), wall_time=wall, method=method, scheme=run.method,
         gap_limit=gap_limit)

@@ -860,7 +860,7 @@ def contact_onsets(P, contact, y, t, pressed, record):
     n = P.n
     R, p, w, vo, _ = kinematics(P, y[:n], y[n:2 * n])
     work = box_scratch()
-    points, depths = work[-2], work[-1]
+    points = work[-2]
     for r in range(contact.shape[0]):
         was = pressed[r]
         if _pair_apart(contact, r, R, p):

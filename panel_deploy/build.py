@@ -189,11 +189,8 @@ def build_model(scene: Scene, design=None) -> Model:
             raise SceneError("closure.cut_hinge", str(e)) from None
         raise
     if scene.contact.panels:
-        # A panel two layers away meets its neighbour once the layer between has slid
-        # out (8 x 8: such a pair met at 0.3 m/s 58 ms after release). Every pair would
-        # also soften the impacts the check is there to find: docs/findings.md 3.2.
-        reach = 2.0 * t if scene.contact.reach is None else scene.contact.reach
-        model = with_panel_contacts(model, scene.contact.k_p, scene.contact.c_p, reach=reach)
+        model = with_panel_contacts(model, scene.contact.k_p, scene.contact.c_p,
+                                    reach=scene.contact.reach)
     return model
 
 

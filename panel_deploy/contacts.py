@@ -10,25 +10,27 @@ within 0.02-0.06 s). :func:`stowed_contacts` lists the pairs; their
 contact (compliant, normal, at the corners of the overlap of the two boxes'
 facing features) is :func:`panel_deploy.dynamics.kernels.panel_contacts`.
 
-The rule that separates pressing from collision (see
-:mod:`panel_deploy.collision.monitor`) is the check's own: a collision is
-interference deeper than ``collision.tolerance`` (0.1 mm by default). With
-``contact.k_p`` = 1e6 N/m a face pressed with 5 N sits 10 um deep, a tenth
-of the tolerance, and 1 um deeper per newton beyond, so pressing stays far
-within it; what goes deeper is an impact the contact could not stop
-within the tolerance (a lone 0.02 kg panel from about 0.7 m/s, a chain of
-them from less) or a press it could not hold (a jam against the hinge
-stops). Either way the collision report says when the verdict on a press
-depends on k_p (:func:`panel_deploy.collision.check.compliance_note`).
+The rule that separates pressing from collision: a collision is
+interference deeper than ``collision.tolerance`` (0.1 mm by default, the
+check's own, :mod:`panel_deploy.collision.monitor`), or two panels in
+contact that come to press at ``collision.impact_speed`` (0.05 m/s by
+default) or faster along the normal: an impact, though the contact stopped it
+within the tolerance (the integrator records each contact onset and its
+speed, ``SimulationResult.contact_onsets``). With ``contact.k_p`` = 1e7 N/m
+a face pressed with 50 N sits 10 um deep, a tenth of the tolerance, and
+0.1 um deeper per newton beyond, so pressing stays far within it; what
+goes deeper slowly is a press the contact could not hold (a jam against
+the hinge stops), and the collision report says that its verdict depends
+on k_p (:func:`panel_deploy.collision.check.compliance_note`). At 1e6 N/m
+the first packing circuit of 6 x 6 pressed 0.7 mm in 0.09 s against the
+stops; at 1e7 it holds, at the same run time (docs/findings.md 3.2).
 
-Which pairs: those within ``contact.reach`` of each other in the stowed
-stacks, by default two thicknesses (a panel two layers away meets its
-neighbour once the layer between has slid out). Not every pair: a contact
-stops an impact within the tolerance too, and on the paper scene with
-every pair in contact its 4.2 m/s impact of L2 into L1 (0.416 s) stayed
-within it and went unreported. So pairs further apart meet as collisions,
-as in the paper, and an impact between two near pairs counts only when it
-goes deeper than the tolerance (docs/findings.md 3.2).
+Which pairs: by default every unhinged pair, so that no verdict depends
+on which pairs were given a contact. ``contact.reach`` limits them to the
+pairs that far apart in the stowed stacks, for speed (10 x 10: 412 pairs
+within two thicknesses against 3569, 0.6x the run time); pairs beyond it
+meet as interference, and a slow one is then a press of panels without a
+contact.
 """
 
 from __future__ import annotations
@@ -90,8 +92,12 @@ def stowed_contacts(model: Model, pairs=None, reach: float = 0.0) -> tuple:
                  if touching_region(model, R, p, a, b, reach) is not None)
 
 
-def with_panel_contacts(model: Model, k_p: float, c_p: float, pairs=None, reach: float = 0.0) -> Model:
-    """``model`` with the contacts of its stowed stacks (:func:`stowed_contacts`),
-    stiffness k_p (N/m) and damping c_p (N s/m)."""
-    return replace(model, contact_pairs=stowed_contacts(model, pairs, reach), k_p=float(k_p),
-                   c_p=float(c_p))
+def with_panel_contacts(model: Model, k_p: float, c_p: float, pairs=None,
+                        reach: float | None = 0.0) -> Model:
+    """``model`` with contacts of stiffness k_p (N/m) and damping c_p (N s/m)
+    between ``pairs`` (default ``model.collision_pairs``, the unhinged ones):
+    all of them for ``reach`` None, else those that touch in the stowed
+    stacks within ``reach`` (m, :func:`stowed_contacts`)."""
+    chosen = (tuple((int(a), int(b)) for a, b in (model.collision_pairs if pairs is None else pairs))
+              if reach is None else stowed_contacts(model, pairs, reach))
+    return replace(model, contact_pairs=chosen, k_p=float(k_p), c_p=float(c_p))

@@ -43,6 +43,12 @@ _WHY_G = "more than 1000 g makes the deployment a crash, not a run"
 #: only exhaust the integrator's step budget.
 MIN_DENSITY = 0.1
 _WHY_DENSITY = "lighter than any solid (aerogels: 0.16 kg/m^3 and up)"
+#: Normal speed, m/s, from which two panels in contact that meet collide
+#: (``collision.impact_speed``, ``CollisionSettings.impact_speed``): below it
+#: they press, as stacked panels do; the paper scene's impacts come at metres a
+#: second, its presses at millimetres.
+IMPACT_SPEED = 0.05
+
 #: Broad-phase margin of the collision check, m (``CollisionSettings.margin``):
 #: a pair farther apart than this is only bounded, never computed, so an
 #: interference tolerance above it could not be told from a miss.
@@ -327,15 +333,14 @@ class ContactSection:
                       "joint-limit contact stiffness, Eq. (4)")
     c_s: float = spec(0.5, number(0.0, 1e6, why=_WHY_STIFF), "N m s/rad",
                       "joint-limit contact damping, Eq. (4)")
-    panels: bool = spec(True, boolean, "",
-                        "contact between unhinged panels that touch in the stowed stacks")
-    k_p: float = spec(1.0e6, number(0, 1e11, low_open=True, why=_WHY_STIFF), "N/m",
+    panels: bool = spec(True, boolean, "", "contact between unhinged panels")
+    k_p: float = spec(1.0e7, number(0, 1e11, low_open=True, why=_WHY_STIFF), "N/m",
                       "normal stiffness of one panel-to-panel contact pressed evenly")
     c_p: float = spec(280.0, number(0.0, 1e8, why=_WHY_STIFF), "N s/m",
                       "normal damping of one panel-to-panel contact")
     reach: Any = spec(None, optional(number(0.0, 100.0)), "m",
-                      "unhinged panels this close in the stowed stacks get a contact "
-                      "(default: two panel thicknesses)")
+                      "only unhinged panels this close in the stowed stacks get a contact "
+                      "(default: every unhinged pair)")
 
 
 @dataclass(frozen=True)
@@ -387,6 +392,10 @@ class CollisionSection:
     tolerance: float = spec(1.0e-4, collision_tolerance, "m",
                             "interference depth beyond which touching panels count as colliding")
     refine: bool = spec(True, boolean, "", "refine between samples so that no collision is missed")
+    impact_speed: float = spec(IMPACT_SPEED, number(0.0, 100.0, low_open=True), "m/s",
+                               "panels in contact that meet this fast or faster along the normal "
+                               "collide (an impact the contact absorbed); slower, they press, "
+                               "and only interference deeper than the tolerance collides")
     noise: float = spec(0.0, number(0.0, 0.1, why="encoders that noisy locate nothing"), "rad",
                         "standard deviation of measured angles (encoders); above 0 a collision "
                         "must be deeper than the noise can fake, and approaching; 0: a "

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..model import Model
+from ..scene import IMPACT_SPEED
 from .monitor import CollisionEvent, CollisionMonitor, CollisionSettings
 
 
@@ -173,23 +174,18 @@ def _how_found(e: CollisionEvent) -> str:
     return " (between samples)" if e.refined else ""
 
 
-#: A first collision slower than this along its normal (m/s) is a press, not an
-#: impact: on the paper scene's impacts the normal speed is metres a second.
-#: Two panels in contact that come to press this fast or faster collide, though
-#: the contact holds them within the tolerance (:meth:`TrajectoryCheck.update`).
-PRESS_SPEED = 0.05
-
-
-def compliance_note(model: Model, event: CollisionEvent | None) -> str | None:
+def compliance_note(model: Model, event: CollisionEvent | None,
+                    impact_speed: float = IMPACT_SPEED) -> str | None:
     """Why the verdict on a first collision that is a press (normal speed
-    below ``PRESS_SPEED``) can depend on a compliance of the model, or None.
+    below ``impact_speed``, m/s, ``collision.impact_speed``) can depend on a
+    compliance of the model, or None.
 
     Two panels in contact (``model.contact_pairs``) went deeper than the
     tolerance against the contact's stiffness k_p; with the penalty closure
     a press can be the loop's compliance at work (with the exact closure
     some vanish, issue 33).
     """
-    if event is None or abs(event.normal_speed) >= PRESS_SPEED:
+    if event is None or abs(event.normal_speed) >= impact_speed:
         return None
     speed = f"a press at {abs(event.normal_speed):.3f} m/s"
     if tuple(sorted(event.bodies)) in model.contact_pairs:
@@ -294,13 +290,14 @@ class TrajectoryCheck:
         """Check one sample (``poses`` as :meth:`CollisionMonitor.update`); the collision events it revealed.
 
         ``onset``, a row of ``SimulationResult.contact_onsets``, is the
-        fastest panel contact onset since the last sample: at ``PRESS_SPEED``
-        or faster it is an impact, a collision although the contact kept the
-        panels within the tolerance (a live stream has no such row).
+        fastest panel contact onset since the last sample: at
+        ``collision.impact_speed`` or faster it is an impact, a collision
+        although the contact kept the panels within the tolerance (a live
+        stream has no such row).
         """
         m = self.monitor
         events = m.update(t, theta, omega, poses)
-        if onset is not None and onset[1] >= PRESS_SPEED:
+        if onset is not None and onset[1] >= self.collision.impact_speed:
             events = sorted([*events, self._impact(onset)], key=lambda e: e.t)
         j = self.checked - self._dropped
         if self.keep is not None and j == 2 * self.keep:
@@ -351,4 +348,5 @@ class TrajectoryCheck:
             counters=dict(m.counters, exact_fallbacks=m.exact_fallbacks),
             collision=self.collision, wall_time=time.perf_counter() - self._start,
             flat_contact=m.flat_contact, first_sample=self._dropped,
-            note=compliance_note(self.monitor.model, self.first_events[0] if self.first_events else None))
+            note=compliance_note(self.monitor.model, self.first_events[0] if self.first_events else None,
+                                 self.collision.impact_speed))

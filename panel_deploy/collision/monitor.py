@@ -113,7 +113,7 @@ from ..dynamics.pack import pack
 from ..dynamics.simulate import body_states
 from ..errors import SceneError, TrajectoryError, shown
 from ..model import Model
-from ..scene import COLLISION_MARGIN, check_collision_tolerance
+from ..scene import COLLISION_MARGIN, IMPACT_SPEED, check_collision_tolerance
 from .geometry import _ROUNDING, CERTIFY_TOL, BoxSet, PairGeometry, box_signed_distance, corner_bound, least_overlap
 from .motion import HermiteSegment, PairSpeedBound
 from .refine import MAX_DEPTH, poses, refine_interval, stack
@@ -163,6 +163,11 @@ class CollisionSettings:
         "header" (a sample's time is when it was measured) or "receipt" (when
         it arrived: nothing is interpolated between samples; module
         docstring, "Receipt timing").
+    impact_speed : float
+        m/s: two panels in contact (``model.contact_pairs``) that meet this
+        fast or faster along the normal collide (scene
+        ``collision.impact_speed``); a collision slower than it is a press
+        (:func:`~.check.compliance_note`).
     """
 
     tolerance: float = 1.0e-4
@@ -174,6 +179,7 @@ class CollisionSettings:
     noise: float = 0.0
     speed_interval: float = 0.0
     stamps: str = "header"
+    impact_speed: float = IMPACT_SPEED
 
     def __post_init__(self):
         check_collision_tolerance(self.tolerance, "collision.tolerance")
@@ -184,6 +190,9 @@ class CollisionSettings:
         if not (math.isfinite(self.noise) and self.noise <= 0.1):  # as the scene key's range
             raise SceneError("collision.noise", f"expected a standard deviation of at most 0.1 "
                                                 f"rad, got {shown(self.noise)}")
+        if not (self.impact_speed > 0 and math.isfinite(self.impact_speed)):
+            raise SceneError("collision.impact_speed", f"expected a number of m/s > 0, got "
+                                                       f"{shown(self.impact_speed)}")
         if not math.isfinite(self.speed_interval):
             raise SceneError("collision.speed_interval", "expected a finite number of s, got inf")
         if self.margin < self.tolerance:
@@ -239,7 +248,7 @@ class CollisionEvent:
         the panels passed through each other).
     impact : bool
         True for two panels in contact (``model.contact_pairs``) that came to
-        press at ``collision.check.PRESS_SPEED`` or faster: an impact the
+        press at ``CollisionSettings.impact_speed`` or faster: an impact the
         contact absorbed, found by the integrator (``t`` its step's end,
         ``distance`` 0); False for an interference deeper than the tolerance.
     """

@@ -65,6 +65,8 @@ class Packed(NamedTuple):
         velocity. None when the model has no air: numba then compiles the
         kernels without the drag code (a flag or an empty array kept it, and
         cost a run without air 5-9 % in speed).
+    half : (n + 1, 3) float
+        Half sizes of each body's box along its own axes, m (ground last).
     contact : (q, 10) float, or None without panel contacts
         One row per pair of :attr:`Model.contact_pairs`: its bodies (kernel
         indices, as floats), their half edges (m, 3 + 3), and the stiffness
@@ -104,6 +106,7 @@ class Packed(NamedTuple):
     gravity: np.ndarray
     has_gravity: bool
     air: np.ndarray | None
+    half: np.ndarray
     contact: np.ndarray | None
 
 
@@ -175,5 +178,6 @@ def pack(model: Model) -> Packed:
         has_gravity=bool(np.any(gravity != 0.0)),
         air=np.array([[*(0.5 * model.bodies[b].size[:2]), drag] for b in body_of],
                      dtype=float).reshape(n, 3) if drag > 0.0 else None,
+        half=f3([0.5 * model.bodies[b].size for b in body_of + [model.ground]]),
         contact=_contact_rows(model, index),
     )

@@ -85,7 +85,6 @@ def test_factor_solve_and_product_are_the_dense_ones(model):
         out = np.empty(n)
         articulated.times(P, S, I6, tau, out, np.empty((2, n + 1, 6)))
         assert np.abs(out - M @ tau).max() < 1e-12 * np.abs(M).max() * np.abs(tau).max()
-        assert np.abs(articulated.mass_matrix(P, S, I6) - M).max() < 1e-12 * np.abs(M).max()
 
 
 @pytest.mark.parametrize("rows_per_coordinate", [0.2, 2.0])
@@ -98,13 +97,14 @@ def test_w_solve_is_the_dense_solve(model, rows_per_coordinate):
     rng = np.random.default_rng(3)
     y = next(states(model, 1))
     M, _, (R, p, _, _, S), *_ = kernels.mass_and_bias(P, y[:n], y[n:2 * n])
-    I6 = articulated.inertias(P, *kernels.body_inertias(P, R, p))
+    Jb, hb = kernels.body_inertias(P, R, p)
+    I6 = articulated.inertias(P, Jb, hb)
     r = int(rows_per_coordinate * n)
     U = rng.normal(size=(r, n)) * (rng.uniform(size=(r, n)) < 0.3)
     Kd, Cd = rng.uniform(0, 100, n), rng.uniform(0, 1, n)
     kk, cc = rng.uniform(0, 1e4, r), rng.uniform(0, 10, r)
     hg = 1e-3
-    factor = rosenbrock._w_factor(P, hg, S, I6, Kd, Cd, U, kk, cc)
+    factor = rosenbrock._w_factor(P, hg, S, I6, Jb, hb, Kd, Cd, U, kk, cc)
     assert factor[-2] == (r > rosenbrock.DENSE_ROWS * n) and factor[-1]
     g = rng.normal(size=n)
     v = np.empty(n)

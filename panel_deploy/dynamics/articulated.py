@@ -158,34 +158,3 @@ def times(P, S, I6, x, out, work):
             for r in range(6):
                 f[b, r] += f[i, r]
 
-
-@njit(cache=True)
-def mass_matrix(P, S, I6):
-    """The mass matrix M (n, n) by composite rigid bodies: ``M[i, j] = S_j . Ic_i
-    S_i`` for j = i or an ancestor of i, Ic_i the spatial inertia of i's subtree
-    (ground frame, so the subtrees add without transforms). O(n d) for a tree
-    of depth d, for the factorisations that need M itself."""
-    n = P.n
-    Ic = I6.copy()
-    for i in range(n - 1, -1, -1):
-        a = P.parent[i]
-        if a < n:
-            for r in range(6):
-                for c in range(6):
-                    Ic[a, r, c] += Ic[i, r, c]
-    M = np.zeros((n, n))
-    F = np.empty(6)
-    for i in range(n):
-        for r in range(6):
-            s = 0.0
-            for c in range(6):
-                s += Ic[i, r, c] * S[i, c]
-            F[r] = s
-        j = i
-        while j < n:
-            s = 0.0
-            for r in range(6):
-                s += S[j, r] * F[r]
-            M[i, j] = M[j, i] = s
-            j = P.parent[j]
-    return M

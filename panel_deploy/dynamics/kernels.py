@@ -578,7 +578,7 @@ def body_inertias(P, R, p):
 
 
 @njit(cache=True)
-def _crba(P, S, Jb, hb):
+def mass_matrix(P, S, Jb, hb):
     """The mass matrix (n, n) from :func:`body_inertias`' (J, h)."""
     n = P.n
     # composite bodies (Jc, hc, mc), accumulated leaves first; h and m share
@@ -968,7 +968,7 @@ def mass_and_bias(P, theta, omega):
     kin = kinematics(P, theta, omega)
     R, p, _, _, S = kin
     Jb, hb = body_inertias(P, R, p)
-    M = _crba(P, S, Jb, hb)
+    M = mass_matrix(P, S, Jb, hb)
     Q, acc, spring, dissipation, gravity_energy = _bias(P, theta, omega, kin, Jb, hb)
     return M, Q, kin, acc, spring, dissipation, gravity_energy
 
@@ -1210,7 +1210,7 @@ def stiff_jacobian(P, y):
     kin, Kd, Cd, U, kk, cc = stiff_terms(P, y)
     R, p, w, vo, S = kin
     Jb, hb = body_inertias(P, R, p)
-    M = _crba(P, S, Jb, hb)
+    M = mass_matrix(P, S, Jb, hb)
     Kq = np.zeros((n, n))
     Cq = np.zeros((n, n))
     for i in range(n):

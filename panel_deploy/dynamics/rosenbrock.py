@@ -136,13 +136,14 @@ def _jac_times(n, A, B, u, out):
 
 @njit(cache=True)
 def terms(P, y):
-    """The stiff Jacobian at y for :func:`step_terms`: (S, I6, Kd, Cd, U, kk, cc),
-    the terms of :func:`kernels.stiff_terms` with the joint screws S and the
-    spatial inertias I6 of the mass matrix (:mod:`.articulated`)."""
+    """The stiff Jacobian at y for :func:`step_terms`: (S, I6, Jb, hb, Kd, Cd,
+    U, kk, cc), the terms of :func:`kernels.stiff_terms` with the joint screws S,
+    the spatial inertias I6 of the mass matrix (:mod:`.articulated`) and the
+    body inertias (Jb, hb) they are made of (:func:`kernels.body_inertias`)."""
     kin, Kd, Cd, U, kk, cc = kernels.stiff_terms(P, y)
     R, p, _, _, S = kin
     Jb, hb = kernels.body_inertias(P, R, p)
-    return S, articulated.inertias(P, Jb, hb), Kd, Cd, U, kk, cc
+    return S, articulated.inertias(P, Jb, hb), Jb, hb, Kd, Cd, U, kk, cc
 
 
 #: Rows of U per coordinate above which :func:`_w_factor` forms and factors the
@@ -153,7 +154,7 @@ DENSE_ROWS = 0.5
 
 
 @njit(cache=True)
-def _w_factor(P, hg, S, I6, Kd, Cd, U, kk, cc):
+def _w_factor(P, hg, S, I6, Jb, hb, Kd, Cd, U, kk, cc):
     """Factor ``M W = H + U^T diag(wq) U`` with ``H = M + diag(hg Cd + hg^2 Kd)``
     and ``wq = hg cc + hg^2 kk``.
 
@@ -173,7 +174,7 @@ def _w_factor(P, hg, S, I6, Kd, Cd, U, kk, cc):
     for q in range(r):
         wq[q] = hg * cc[q] + hg * hg * kk[q]
     if r > DENSE_ROWS * n:
-        LU, piv, ok = _w_dense(P, arm, S, I6, U, wq)
+        LU, piv, ok = _w_dense(P, arm, S, Jb, hb, U, wq)
         return np.empty((0, 6)), np.empty(0), np.empty((0, n)), wq, LU, piv, True, ok
     UA, D, ok = articulated.factor(P, S, I6, arm)
     Z = np.empty((r, n))
@@ -195,12 +196,13 @@ def _w_factor(P, hg, S, I6, Kd, Cd, U, kk, cc):
 
 
 @njit(cache=True)
-def _w_dense(P, arm, S, I6, U, wq):
-    """LU of ``M + diag(arm) + U^T diag(wq) U`` (n, n): (LU, piv, ok). A contact
-    row is non-zero only on the paths from its two bodies to the root, so its
-    outer product costs nnz^2, not n^2."""
+def _w_dense(P, arm, S, Jb, hb, U, wq):
+    """LU of ``M + diag(arm) + U^T diag(wq) U`` (n, n): (LU, piv, ok), M by
+    composite bodies (:func:`kernels.mass_matrix`). A contact row is non-zero
+    only on the paths from its two bodies to the root, so its outer product
+    costs nnz^2, not n^2."""
     n = P.n
-    W = articulated.mass_matrix(P, S, I6)
+    W = kernels.mass_matrix(P, S, Jb, hb)
     for i in range(n):
         W[i, i] += arm[i]
     idx = np.empty(n, np.int64)
@@ -345,11 +347,11 @@ def step_terms(P, y, f, h, jac, K):
     :func:`articulated.times`: the same as :func:`step` with ``A = -M^-1 K``,
     ``B = -M^-1 C``, to round-off (test_dynamics_articulated).
     """
-    S, I6, Kd, Cd, U, kk, cc = jac
+    S, I6, Jb, hb, Kd, Cd, U, kk, cc = jac
     n = P.n
     N = y.shape[0]
     hg = h * GAMMA
-    factor = _w_factor(P, hg, S, I6, Kd, Cd, U, kk, cc)
+    factor = _w_factor(P, hg, S, I6, Jb, hb, Kd, Cd, U, kk, cc)
     if not factor[-1]:
         return y.copy(), np.full(N, np.inf), False
     yi = np.empty(N)

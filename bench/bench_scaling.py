@@ -98,7 +98,8 @@ def lockstep(model, result, collisions):
             break
         for _, times, check in out[::1 if j % 2 else -1]:
             t0 = time.perf_counter()
-            check.update(result.t[j], result.theta[j], result.omega[j], (result.rotation[j], result.position[j]))
+            check.update(result.t[j], result.theta[j], result.omega[j], (result.rotation[j], result.position[j]),
+                         result.contact_onsets[j])
             times.append(time.perf_counter() - t0)
     return out
 
@@ -109,7 +110,8 @@ def d_j_per_sample(model, result, collision):
     times = []
     for j in range(len(result.t)):
         t0 = time.perf_counter()
-        check.update(result.t[j], result.theta[j], result.omega[j], (result.rotation[j], result.position[j]))
+        check.update(result.t[j], result.theta[j], result.omega[j], (result.rotation[j], result.position[j]),
+                     result.contact_onsets[j])
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
 

@@ -8,6 +8,7 @@ import resource
 import numpy as np
 import pytest
 
+from panel_deploy.build import build_model
 from panel_deploy.collision import CollisionSettings, StreamCheck, check_trajectory
 from panel_deploy.collision.refine import MAX_DEPTH
 from panel_deploy.collision.stream import KEEP
@@ -300,3 +301,19 @@ def test_throttle_holds_back_and_counts():
     assert throttle("gap") == 0  # kinds are throttled apart
     now[0] = 1.5
     assert throttle("stamp") == 5
+
+
+def test_a_stream_of_a_model_with_panel_contact_says_what_it_cannot_check():
+    """Joint states carry no contact onsets: with panel contact a clean stream is
+    not OK, and its verdict says why (the paper's model has no contact: OK)."""
+    contact = load_scene(resolve_scene("paper_4x4"), ["contact.panels=true", "simulation.t_end=0.1",
+                                                      "simulation.samples=21"])
+    for s, level in ((contact, 1), (load_scene(resolve_scene("paper_4x4"), ["simulation.t_end=0.1",
+                                                                             "simulation.samples=21"]), 0)):
+        model = build_model(s)
+        result = simulate(model, s.simulation)
+        stream, first = _feed(model, CollisionSettings.from_scene(s), result.t, result.theta, result.omega)
+        verdict, text, values = stream.verdict()
+        assert first is None and verdict == level, text
+        assert values["contact_pairs"] == len(model.contact_pairs) == (54 if level else 0)
+        assert ("an impact the contact absorbs does not show in joint states" in text) == bool(level)

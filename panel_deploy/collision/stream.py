@@ -232,7 +232,8 @@ class StreamCheck:
                                    if math.isfinite(c.monitor.min_distance) else None),
                   "refused": refused,
                   "gaps": self.gaps, "largest_gap": self.largest_gap, "skipped": self.skipped,
-                  "solved": list(self.solved), "measured": list(self.measured)}
+                  "solved": list(self.solved), "measured": list(self.measured),
+                  "contact_pairs": len(self.model.contact_pairs)}
         values.update({f"refused_{field}": n for field, n in self.refused.items()})
         faults = []
         if refused:
@@ -244,6 +245,12 @@ class StreamCheck:
             faults.append(f"{self.skipped} of {self.skipped + c.checked} joint states skipped to "
                           f"keep up (the newest checked); d is over the checked ones, an upper "
                           f"bound")
+        contacts = len(self.model.contact_pairs)
+        if contacts:
+            # Joint states carry no contact onsets (SimulationResult.contact_onsets).
+            faults.append(f"panel contact on {contacts} pairs: an impact the contact absorbs "
+                          f"does not show in joint states and is not checked here (simulate, "
+                          f"or collide on a trajectory file, checks it)")
         if c.collided:
             e = c.first_events[0]
             values.update(first_collision_pair=list(e.names), first_collision_t=e.t,

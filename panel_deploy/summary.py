@@ -57,8 +57,9 @@ def deployment_text(s: dict) -> str:
             # The paper counts a deployment complete when the array first lies flat.
             after = (" (after the array first lay flat: the deployment was complete)"
                      if s["time_to_flat"] is not None and first["t"] > s["time_to_flat"] else "")
-            lines.append(f"first collision at {first['t']:.4g} s{after} between {' and '.join(first['pair'])}, "
-                         f"approach speed v = {c['v']:.4g} m/s; smallest distance before it d = {d}"
+            how = " (an impact the panel contact absorbed)" if first.get("impact") else ""
+            lines.append(f"first collision at {first['t']:.4g} s{after} between {' and '.join(first['pair'])}"
+                         f"{how}, approach speed v = {c['v']:.4g} m/s; smallest distance before it d = {d}"
                          + partial)
             if c.get("note"):
                 lines.append(f"  note: {c['note']}")

@@ -20,6 +20,7 @@ from panel_deploy.export import export_mjcf
 from panel_deploy.kinematics import forward_kinematics
 from panel_deploy.model import Body, Hinge, Model, State, box_inertia
 from panel_deploy.scene import SimulationSection, load_scene
+from panel_deploy.summary import deployment_summary, deployment_text
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "config" / "scenes" / "paper_4x4.yaml"
@@ -271,6 +272,8 @@ def test_an_impact_the_contact_absorbs_is_still_a_collision(tmp_path, capsys):
     touch = check_trajectory(model, result).first_collision
     assert touch.impact and set(touch.names) == {"r4c1", "r4c4"} and 0.05 <= touch.normal_speed < 0.1
     assert touch.t == pytest.approx(0.284, abs=2e-3)
+    text = deployment_text(deployment_summary(model, result, check_trajectory(model, result)))
+    assert "between r4c1 and r4c4 (an impact the panel contact absorbed)" in text, text
     faster = CollisionSettings.from_scene(scene, impact_speed=0.1)
     hit = check_trajectory(model, result, faster).first_collision
     through = check_trajectory(*runs["false"][1:]).first_collision

@@ -1099,45 +1099,53 @@ def _outer_add(out, scale, u):
 
 @njit(cache=True)
 def _pressed_points(P, contact, R, p):
-    """How many panel contact points are pressed (depth > 0) at poses (R, p)."""
-    if contact is None:
-        return 0
-    work = box_scratch()
+    """The panel contact points pressed (depth > 0) at poses (R, p): (count,
+    rows), row i < count ``[pair, normal (3), point (3, m), depth (m)]``, so that
+    the separating axes run once a call, not once to count and again to fill."""
+    rows = np.empty((64, 8))
     count = 0
-    box = _boxes(P, R, p)
-    for r in range(contact.shape[0]):
-        if _pair_apart(contact, r, box):
-            continue
-        count += _pair_points(P, contact, r, R, p, work)[0]
-    return count
-
-
-@njit(cache=True)
-def _contact_rows(P, contact, R, p, S, U, kk, cc, start):
-    """Write from row ``start`` of U, kk, cc the pressed panel contact points:
-    G, the row of -d(depth)/d theta, and the stiffness and damping of
-    :func:`_contact_law` at its depth, so that K gains ``k G^T G`` (C likewise)."""
     if contact is None:
-        return
-    Jp = np.empty((3, P.n))
+        return count, rows
     work = box_scratch()
     points, depths = work[-2], work[-1]
-    row = start
     box = _boxes(P, R, p)
     for r in range(contact.shape[0]):
         if _pair_apart(contact, r, box):
             continue
         found, normal = _pair_points(P, contact, r, R, p, work)
+        if count + found > rows.shape[0]:
+            grown = np.empty((2 * rows.shape[0] + found, 8))
+            grown[:count] = rows[:count]
+            rows = grown
         for q in range(found):
-            _, _, _, k, c = _contact_law(depths[q], 0.0, contact[r, 8], contact[r, 9])
-            kk[row], cc[row] = k, c
-            x = (points[q, 0], points[q, 1], points[q, 2])
-            Jp[:] = 0.0
-            _point_jacobian(P, S, int(contact[r, 1]), x, Jp, 0, 1.0)
-            _point_jacobian(P, S, int(contact[r, 0]), x, Jp, 0, -1.0)
-            for col in range(P.n):
-                U[row, col] = normal[0] * Jp[0, col] + normal[1] * Jp[1, col] + normal[2] * Jp[2, col]
-            row += 1
+            rows[count, 0] = r
+            rows[count, 1], rows[count, 2], rows[count, 3] = normal
+            rows[count, 4], rows[count, 5], rows[count, 6] = points[q, 0], points[q, 1], points[q, 2]
+            rows[count, 7] = depths[q]
+            count += 1
+    return count, rows
+
+
+@njit(cache=True)
+def _contact_rows(P, contact, pressed, S, U, kk, cc, start):
+    """Write from row ``start`` of U, kk, cc the pressed panel contact points
+    (:func:`_pressed_points`' (count, rows)): G, the row of -d(depth)/d theta,
+    and the stiffness and damping of :func:`_contact_law` at its depth, so that K
+    gains ``k G^T G`` (C likewise)."""
+    if contact is None:
+        return
+    count, rows = pressed
+    Jp = np.empty((3, P.n))
+    for i in range(count):
+        r = int(rows[i, 0])
+        _, _, _, k, c = _contact_law(rows[i, 7], 0.0, contact[r, 8], contact[r, 9])
+        kk[start + i], cc[start + i] = k, c
+        x = (rows[i, 4], rows[i, 5], rows[i, 6])
+        Jp[:] = 0.0
+        _point_jacobian(P, S, int(contact[r, 1]), x, Jp, 0, 1.0)
+        _point_jacobian(P, S, int(contact[r, 0]), x, Jp, 0, -1.0)
+        for col in range(P.n):
+            U[start + i, col] = rows[i, 1] * Jp[0, col] + rows[i, 2] * Jp[1, col] + rows[i, 3] * Jp[2, col]
 
 
 @njit(cache=True, inline='always')
@@ -1166,11 +1174,12 @@ def stiff_terms(P, y):
         Cd[i] = P.c[i] + (P.c_s if contact else 0.0)
     m = P.cut_a.shape[0]
     closure = 6 * m if P.method == PENALTY else m
-    rows = closure + _pressed_points(P, P.contact, R, p)
+    pressed = _pressed_points(P, P.contact, R, p)
+    rows = closure + pressed[0]
     U = np.zeros((rows, n))
     kk = np.empty(rows)
     cc = np.empty(rows)
-    _contact_rows(P, P.contact, R, p, S, U, kk, cc, closure)
+    _contact_rows(P, P.contact, pressed, S, U, kk, cc, closure)
     Jw = np.empty((3, n))
     for j in range(m):
         th, g = _cut_angle(P, j, R)

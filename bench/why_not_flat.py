@@ -5,8 +5,8 @@ file) to ``--t-end`` without stopping at collisions and prints how close to flat
 each second of the run came, the first flat sample, and at the end:
 
 - the hinges pressed onto their flat stop (theta < 0), with the stop's torque
-  k_s |theta| (N m): a hinge that reached flat early and that the loop pushes
-  past it, which holds the loop as a rigid link;
+  k_s |theta| (N m): hinges the loop pushes past flat while others are still
+  folded, the sign of a non-flat equilibrium of the springs;
 - the most folded hinges, with their spring torque k theta and the torque of
   the weight on that tree coordinate (-dV/dtheta of the panels' potential
   energy with the loop cut, N m);

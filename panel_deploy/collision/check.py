@@ -261,7 +261,9 @@ class TrajectoryCheck:
         self.first_events: list = []
         self.n_valid = None
         self.d, self.d_time, self.d_pair = math.inf, math.nan, None
-        self._contact_pair = {tuple(pair): k for k, pair in enumerate(self.monitor.pairs.tolist())}
+        # contact pair index -> checked pair index (contact pairs are collision pairs)
+        index = {pair: k for k, pair in enumerate(model.collision_pairs)} if model.contact_pairs else {}
+        self._impact_pair = [index[pair] for pair in model.contact_pairs]
 
     @property
     def collided(self) -> bool:
@@ -322,12 +324,11 @@ class TrajectoryCheck:
     def _impact(self, onset) -> CollisionEvent:
         """The collision event of a contact onset record (``result.ONSET_COLUMNS``)."""
         m = self.monitor
-        a, b = m.model.contact_pairs[int(onset[2])]
-        k = self._contact_pair[(a, b)] if (a, b) in self._contact_pair else self._contact_pair[(b, a)]
+        k = self._impact_pair[int(onset[2])]
         speed = float(onset[1])
         return CollisionEvent(
             t=float(onset[0]), contact_time=float(onset[0]), sample=self.checked, pair=k,
-            bodies=(a, b), names=m.pair_names(k), distance=0.0, point=np.array(onset[3:6]),
+            bodies=tuple(int(b) for b in m.pairs[k]), names=m.pair_names(k), distance=0.0, point=np.array(onset[3:6]),
             normal=np.array(onset[6:9]), approach_speed=speed, normal_speed=speed, refined=True,
             impact=True)
 

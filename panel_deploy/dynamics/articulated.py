@@ -157,4 +157,3 @@ def times(P, S, I6, x, out, work):
         if b < n:
             for r in range(6):
                 f[b, r] += f[i, r]
-

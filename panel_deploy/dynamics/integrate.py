@@ -62,9 +62,8 @@ class Integration:
     ``y`` (s_done, N) holds the samples reached; ``status`` a
     :class:`~panel_deploy.dynamics.result.Status` (0 = t_end reached, negative
     = failure with ``message``); ``method`` the :data:`METHODS` entry that ran
-    ("dopri5" or "ros34pw2" for "compiled"); ``onsets`` (s_done,
-    9) the fastest panel contact onset in each sample's interval
-    (:func:`record_onsets`).
+    ("dopri5" or "ros34pw2" for "compiled"); ``onsets`` (s_done, 9) the
+    fastest panel contact onset in each sample's interval (:func:`record_onsets`).
     """
 
     y: np.ndarray
@@ -666,7 +665,6 @@ def _not_started(y0, message, method):
     """The one block of a run that failed at its first sample."""
     yield Integration(y0[None, :].copy(), Status.NON_FINITE, message, Counters(nfev=1), method,
                       no_onsets(1))
-
 
 
 @dataclass(frozen=True)

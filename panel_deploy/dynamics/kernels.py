@@ -753,8 +753,8 @@ def air_drag(P, air, R, p, w, vo, f):
 #: is k d^2 / (2 D) and the damping c d / D, so that the push and its
 #: stiffness grow from zero at first touch. A contact in full at once makes
 #: the push (and the Jacobian) jump, and a step across it must shrink to
-#: where the jump no longer matters. A face pressed with up to 5 N (k_p =
-#: 1e6 N/m) sits on the ramp, a tenth of the collision tolerance deep at most.
+#: where the jump no longer matters. A face pressed with up to 50 N (k_p =
+#: 1e7 N/m) sits on the ramp, a tenth of the collision tolerance deep at most.
 CONTACT_RAMP = 1e-5
 
 
@@ -862,10 +862,11 @@ def contact_onsets(P, contact, y, t, pressed, record):
 
     Of those, the fastest onset (the largest approach speed over its points)
     goes to ``record`` (9,), laid out as ``result.ONSET_COLUMNS``, at time t
-    (s), if faster than the one already there (record[1]; 0 for none). Called once per accepted step: a
-    contact stops an impact within a step or two, so the speed at the step that
-    brought the pair into contact is the impact's; the samples would miss it
-    (issue 33: the contact absorbed a 4.2 m/s impact between two samples).
+    (s), if faster than the one already there (record[1]; 0 for none).
+    Called once per accepted step: a contact stops an impact within a step or
+    two, so the speed at the step that brought the pair into contact is the
+    impact's; the samples would miss it (issue 33: the contact absorbed a
+    4.2 m/s impact between two samples).
     """
     if contact is None:
         return

@@ -124,8 +124,8 @@ def test_live_nodes_publish_the_contract_with_its_qos(graph):
 
 def test_the_installed_package_holds_the_interface_definitions():
     """Package data: recordings embed these schemas, readers register them."""
-    assert set(contract.definitions()) == {contract.COLLISION_EVENT, contract.MONITOR_VERDICT,
-                                           contract.OPTIMISER_PROGRESS_MSG}
+    assert set(contract.definitions()) == {contract.COLLISION_EVENT, contract.CONTACT_ONSET,
+                                           contract.MONITOR_VERDICT, contract.OPTIMISER_PROGRESS_MSG}
     assert {p.name for p in (contract.INTERFACES_DIR / "action").iterdir()} == {
         "Deploy.action", "Optimise.action"}
     assert (contract.INTERFACES_DIR / "package.xml").is_file()

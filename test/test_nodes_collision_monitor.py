@@ -181,3 +181,44 @@ def test_invalid_tolerance_is_rejected(graph, param, reason):
     result, = client.call(SetParameters, "/collision_monitor/set_parameters",
                           SetParameters.Request(parameters=[param.to_parameter_msg()])).results
     assert not result.successful and reason in result.reason
+
+
+def test_a_model_with_panel_contact_is_ok_only_with_its_contact_onsets(graph):
+    """Joint states cannot show an impact the panel contact absorbed: from a
+    driver without dynamics/contact_onsets (encoders) the clean verdict is
+    WARN at once, saying so; with each interval's onset it is OK."""
+    from panel_deploy.contract.cdr import SampleEncoder
+    from panel_deploy.scene_text import scene_yaml
+    from panel_deploy_interfaces.msg import ContactOnset
+
+    client, publisher, events, diagnostics, markers, verdicts = graph
+    scene, model = configure(load_scene(resolve_scene("paper_4x4"), ["contact.panels=true"]),
+                             DynamicsParameters(t_end=0.1, rate_hz=200.0))
+    result = simulate(model, scene.simulation)
+    latched = messages.qos(contract.LATCHED)
+    source = client.node.create_publisher(String, "/panel_deploy/model", latched)
+    verdicts.clear()
+    source.publish(String(data=scene_yaml(scene)))
+    # A new model starts afresh: its first verdict waits for joint states.
+    wait_for(lambda: verdicts and verdicts[-1].message == "waiting for joint states",
+             what="the contact model")
+    feed(publisher, model, result, range(len(result.t)))
+    wait_for(lambda: verdicts and verdicts[-1].samples == len(result.t), what="the samples checked")
+    assert verdicts[-1].level == MonitorVerdict.WARN and verdicts[-1].onsets == 0
+    assert "no contact onsets came: an impact the contact absorbs" in verdicts[-1].message
+
+    onsets = client.node.create_publisher(ContactOnset, "/dynamics/contact_onsets",
+                                          messages.qos(contract.STREAM))
+    wait_for(lambda: onsets.get_subscription_count() >= 1, what="the monitor's onset subscription")
+    assert client.trigger("/collision_monitor/reset").success
+    encoder = SampleEncoder(model)
+    names, theta, omega, torque = hinge_states(model, result)
+    for j in range(len(result.t)):
+        publisher.publish(messages.joint_state(names, result.t[j], theta[j], omega[j], torque[j]))
+        onsets.publish(encoder.onset(result.t[j], result.contact_onsets[j]))
+    wait_for(lambda: verdicts and verdicts[-1].onsets == len(result.t) - 1, what="the onsets checked")
+    wait_for(lambda: verdicts[-1].level == MonitorVerdict.OK, timeout=5,
+             what=lambda: f"an OK verdict, got {verdicts[-1].message}")
+    assert verdicts[-1].samples == len(result.t) and verdicts[-1].message == "no collision"
+    client.node.destroy_publisher(onsets)
+    client.node.destroy_publisher(source)

@@ -36,6 +36,27 @@ def test_run_paper_scene_matches_simulate(compiled_nodes):
     assert "t = " in proc.stderr and "collision" in proc.stderr
 
 
+def test_run_finds_an_impact_the_panel_contact_absorbed(compiled_nodes):
+    """Every pair of the paper scene in contact: r4c1 comes down on r4c4 at
+    0.284 s and the contact holds them within the tolerance, which joint states
+    cannot show; the monitor checks the dynamics node's contact onsets and
+    reports the impact simulate reports."""
+    sets = ["contact.panels=true", "simulation.t_end=0.3"]
+    proc = subprocess.run([CLI, "run", "paper_4x4", "--real-time-factor", "0", "--json",
+                           *(a for x in sets for a in ("--set", x))],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1, proc.stderr
+    scene, model = configure(load_scene(resolve_scene("paper_4x4"), sets),
+                             DynamicsParameters(rate_hz=200.0))
+    report = check_trajectory(model, simulate(model, scene.simulation),
+                              CollisionSettings.from_scene(scene))
+    assert report.first_collision.impact
+    first = json.loads(proc.stdout)["collision"]["first_collision"]
+    assert first["pair"] == list(report.first_collision.names)
+    assert first["t"] == pytest.approx(report.first_collision.t, abs=1e-12)
+    assert first["v"] == pytest.approx(report.first_collision.normal_speed, rel=1e-12)
+
+
 def test_the_driver_drives_nodes_in_processes_of_their_own(compiled_nodes):
     """run's driver knows the nodes by their topics and services only."""
     ns = "/separate"

@@ -36,8 +36,8 @@ PER_SAMPLE = ("/clock", "/joint_states", "/panel_deploy/panels", "/tf")
 #: Latched topics, as ROS users expect them (a late subscriber gets the last message).
 LATCHED = ("/robot_description", "/panel_deploy/model", "/tf_static", "/dynamics/scene", "/collision_monitor/verdict",
            "/optimiser/result")
-#: What simulate --record has no source for: no optimiser runs.
-NOT_SIMULATED = ("/optimiser/progress", "/optimiser/result")
+#: What simulate --record has no source for: no optimiser runs, no panel contact in the paper's model.
+NOT_SIMULATED = ("/optimiser/progress", "/optimiser/result", "/dynamics/contact_onsets")
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +81,7 @@ def test_mcap_reader_summary_counts_and_chunks(recorded):
             assert channel.metadata["topic_type_hash"] == m.type_hash(schema.name)
             qos = yaml.safe_load(channel.metadata["offered_qos_profiles"])[0]
             assert qos["durability"] == ("transient_local" if topic in LATCHED else "volatile")
-            assert qos["depth"] == (5000 if topic in ("/joint_states", "/clock") else
+            assert qos["depth"] == (5000 if topic in ("/joint_states", "/clock", "/dynamics/contact_onsets") else
                                     1 if topic in LATCHED else 100)
             assert counts.get(channel.id, 0) == expected[topic], topic
         assert summary.statistics.message_count == sum(expected.values())
@@ -266,6 +266,35 @@ def test_collide_on_the_recording_reports_the_simulated_collision(recorded, caps
     assert got["first_collision"]["pair"] == list(report.first_collision.names)
     assert math.isclose(got["v"], report.v, rel_tol=1e-12)
     assert math.isclose(got["d"], report.d, rel_tol=1e-12)
+
+
+def test_a_recording_with_panel_contact_carries_its_onsets(tmp_path, capsys):
+    """Every pair of the paper scene in contact: r4c1 comes down on r4c4 at
+    0.284 s, an impact the contact holds within the tolerance (test_contacts).
+    The recording has each sample's onset on dynamics/contact_onsets (rosbags
+    reads them), and ``collide`` on it finds the impact the simulation's
+    check found, with a verdict that says nothing is missing."""
+    from panel_deploy.collision import check_trajectory
+
+    sets = ["--set", "contact.panels=true", "--set", "simulation.t_end=0.3", "--set",
+            "simulation.samples=61"]
+    path = tmp_path / "contact.mcap"
+    assert main(["simulate", "paper_4x4", *sets, "--record", str(path), "--json"]) == 0
+    first = json.loads(capsys.readouterr().out)["collision"]["first_collision"]
+    scene = load_scene(resolve_scene("paper_4x4"), [a for a in sets if a != "--set"])
+    model, result, report = simulate_scene(scene)
+    assert report.first_collision.impact and first["t"] == report.first_collision.t
+    assert report.first_collision.t == check_trajectory(model, result).first_collision.t
+    onsets = _rosbags_messages(path)["/dynamics/contact_onsets"]
+    assert [t for t, _ in onsets] == [round(t * 1e9) for t in result.t]
+    fastest = max((msg for _, msg in onsets), key=lambda msg: msg.speed)
+    assert (fastest.body_a, fastest.body_b) == ("r4c1", "r4c4") and fastest.t == report.first_collision.t
+    assert main(["collide", str(path), "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["first_collision"]["t"] == report.first_collision.t
+    assert got["first_collision"]["pair"] == list(report.first_collision.names)
+    assert got["verdict"] == {"level": 2, "message": got["verdict"]["message"]}
+    assert "onsets" not in got["verdict"]["message"], got["verdict"]
 
 
 @pytest.mark.parametrize("search", [[], ["--set", "optimisation.damping_ratio_bounds=[0.043,0.3]"]])

@@ -113,6 +113,25 @@ def test_encoder_bytes_equal_rosbags_serializer(model, names):
     assert (static.header.frame_id, static.child_frame_id) == ("array1/world", "array1/r1c2+r1c3")
 
 
+def test_contact_onset_bytes_equal_rosbags_serializer():
+    """Every contact pair's onset, no onset, the pair's names in order and a prefixed frame."""
+    model = build_model(load_scene(resolve_scene("paper_4x4"), ["contact.panels=true"]))
+    rng = np.random.default_rng(5)
+    encoder = SampleEncoder(model, "array1/")
+    for k in (*range(len(model.contact_pairs)), -1, 3):  # 3 again: its layout reused
+        onset = np.array([rng.uniform(0, 1), rng.uniform(0, 4), k, *rng.normal(size=6)])
+        a, b = ((model.bodies[i].name for i in model.contact_pairs[k]) if k >= 0 else ("", ""))
+        t = float(rng.uniform(0, 2))
+        expected = _T[m.CONTACT_ONSET](
+            header=m._header(t, "array1/world"), body_a=a, body_b=b, t=float(onset[0]),
+            speed=float(onset[1]), point=m._vector(onset[3:6], "Point"), normal=m._vector(onset[6:9]))
+        data = encoder.onset(t, onset)
+        assert data == m.serialize(expected)
+        fields = contract.onset_fields(m.deserialize(data, m.CONTACT_ONSET))
+        assert fields[:2] == (a, b) and fields[2:4] == (onset[0], onset[1])
+        assert fields[4] + fields[5] == tuple(onset[3:])
+
+
 def test_tf_composes_to_the_link_poses(model, names):
     s = _samples(model, names, count=1, seed=4)[0]
     R, p = link_poses(model, s.rotation, s.position)
@@ -180,7 +199,10 @@ def test_schema_text_decodes_our_bytes(model, names, typename):
              m.MONITOR_VERDICT: m.verdict(2, "collision", VERDICT, 2.416),
              contract.OPTIMISER_PROGRESS_MSG: m.TYPESTORE.types[contract.OPTIMISER_PROGRESS_MSG](
                  header=m._header(3.0), phase="local 1", evaluations=7, best_f=-0.5,
-                 feasible=True, elapsed=3.0)}
+                 feasible=True, elapsed=3.0),
+             m.CONTACT_ONSET: _T[m.CONTACT_ONSET](
+                 header=m._header(0.285), body_a="r4c1", body_b="r4c4", t=0.2841, speed=0.094,
+                 point=m._vector((0.1, 0.2, 0.0), "Point"), normal=m._vector((0.0, 0.0, 1.0)))}
     schema = Schema(id=1, name=typename, encoding="ros2msg", data=m.msgdef(typename).encode())
     decoded = DecoderFactory().decoder_for("cdr", schema)(m.serialize(built[typename]))
     if typename == m.JOINT_STATE:
@@ -189,6 +211,9 @@ def test_schema_text_decodes_our_bytes(model, names, typename):
         assert len(decoded.transforms) == model.n_coords
     elif typename == m.MARKER_ARRAY:
         assert [x.text for x in decoded.markers] == [b.name for b in model.bodies]
+    elif typename == m.CONTACT_ONSET:
+        assert (decoded.body_a, decoded.body_b, decoded.t, decoded.speed) == ("r4c1", "r4c4", 0.2841, 0.094)
+        assert decoded.header.stamp.nanosec == 285_000_000 and decoded.normal.z == 1.0
     elif typename == m.COLLISION_EVENT:
         assert (decoded.body_a, decoded.body_b, decoded.t) == ("a", "b", 0.416)
         assert decoded.header.stamp.sec == 2 and decoded.point.y == 0.16

@@ -300,7 +300,7 @@ class TrajectoryCheck:
         m = self.monitor
         events = m.update(t, theta, omega, poses)
         if onset is not None and onset[1] >= self.collision.impact_speed:
-            events = sorted([*events, self._impact(onset)], key=lambda e: e.t)
+            events = sorted([*events, self._impact(onset, self.checked)], key=lambda e: e.t)
         j = self.checked - self._dropped
         if self.keep is not None and j == 2 * self.keep:
             # Amortised O(P) per sample: drop the older half once per keep samples.
@@ -321,13 +321,34 @@ class TrajectoryCheck:
             self.d, self.d_time, self.d_pair = m.min_distance, float(t), m.pair_names(m.min_pair)
         return events
 
-    def _impact(self, onset) -> CollisionEvent:
-        """The collision event of a contact onset record (``result.ONSET_COLUMNS``)."""
+    def onset(self, onset) -> list:
+        """Check a contact onset that comes apart from its sample (a live
+        stream's ``ContactOnset``, after the joint state it belongs to was
+        checked): a row of ``SimulationResult.contact_onsets`` with t on this
+        check's time. Returns ``[event]`` for an impact (at
+        ``collision.impact_speed`` or faster), else ``[]``; the first
+        collision is then the one :meth:`update` with the onset would give.
+        """
+        if not onset[1] >= self.collision.impact_speed:
+            return []
+        # The samples before the onset are valid; the one whose interval holds it is not.
+        kept = self.checked - self._dropped
+        sample = self._dropped + int(np.searchsorted(self._t[:kept], onset[0]))
+        event = self._impact(onset, sample)
+        if not self.first_events or sample < self.n_valid:
+            self.first_events, self.n_valid = [event], sample
+        elif sample == self.n_valid:
+            self.first_events = sorted([*self.first_events, event], key=lambda e: e.t)
+        return [event]
+
+    def _impact(self, onset, sample: int) -> CollisionEvent:
+        """The collision event of a contact onset record (``result.ONSET_COLUMNS``),
+        revealed by sample number ``sample``."""
         m = self.monitor
         k = self._impact_pair[int(onset[2])]
         speed = float(onset[1])
         return CollisionEvent(
-            t=float(onset[0]), contact_time=float(onset[0]), sample=self.checked, pair=k,
+            t=float(onset[0]), contact_time=float(onset[0]), sample=sample, pair=k,
             bodies=tuple(int(b) for b in m.pairs[k]), names=m.pair_names(k), distance=0.0, point=np.array(onset[3:6]),
             normal=np.array(onset[6:9]), approach_speed=speed, normal_speed=speed, refined=True,
             impact=True)

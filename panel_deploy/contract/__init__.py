@@ -52,6 +52,7 @@ TRIGGER = "std_srvs/srv/Trigger"
 #: Our interface package (panel_deploy/contract/interfaces).
 INTERFACES = "panel_deploy_interfaces"
 COLLISION_EVENT = f"{INTERFACES}/msg/CollisionEvent"
+CONTACT_ONSET = f"{INTERFACES}/msg/ContactOnset"
 MONITOR_VERDICT = f"{INTERFACES}/msg/MonitorVerdict"
 OPTIMISER_PROGRESS_MSG = f"{INTERFACES}/msg/OptimiserProgress"
 DEPLOY_ACTION = f"{INTERFACES}/action/Deploy"
@@ -125,6 +126,8 @@ CLOCK_TOPIC = Topic("clock", CLOCK, STREAM, "dynamics", stamped=True)
 #: ``--ros-args -r /clock:=clock``: rclpy's time source (use_sim_time) reads
 #: ``/clock``; this makes it the array's own clock in the node's namespace.
 CLOCK_REMAP = ("/clock", "clock")
+#: Published only for a model with panel contact: one per joint state, same stamp.
+CONTACT_ONSETS = Topic("dynamics/contact_onsets", CONTACT_ONSET, STREAM, "dynamics", stamped=True)
 TF = Topic("/tf", TF_MESSAGE, EVENTS, "dynamics", stamped=True)
 TF_STATIC = Topic("/tf_static", TF_MESSAGE, LATCHED, "dynamics")
 DIAGNOSTICS = Topic("/diagnostics", DIAGNOSTIC_ARRAY, EVENTS, "dynamics, collision_monitor, optimiser",
@@ -140,7 +143,7 @@ OPTIMISER_PROGRESS = Topic("optimiser/progress", OPTIMISER_PROGRESS_MSG, EVENTS,
 OPTIMISER_RESULT = Topic("optimiser/result", STRING, LATCHED, "optimiser")
 
 #: Every topic, in the order a recording lists its channels.
-TOPICS = (ROBOT_DESCRIPTION, MODEL, DEPLOYED_SCENE, JOINT_STATES, PANELS, DIAGNOSTICS,
+TOPICS = (ROBOT_DESCRIPTION, MODEL, DEPLOYED_SCENE, JOINT_STATES, CONTACT_ONSETS, PANELS, DIAGNOSTICS,
           COLLISION_EVENTS, VERDICT, COLLISION_MARKERS, OPTIMISER_PROGRESS, OPTIMISER_RESULT, CLOCK_TOPIC,
           TF, TF_STATIC)
 
@@ -256,22 +259,33 @@ def event_text(body_a: str, body_b: str, t: float) -> str:
     return f"collision between {body_a} and {body_b} at t = {t:.4f} s"
 
 
+def onset_fields(message) -> tuple:
+    """``(body_a, body_b, t, speed, point, normal)`` of a ``ContactOnset``
+    message (rclpy's or rosbags'), as :meth:`~panel_deploy.collision.StreamCheck.onset` takes them."""
+    p, n = message.point, message.normal
+    return (message.body_a, message.body_b, float(message.t), float(message.speed),
+            (p.x, p.y, p.z), (n.x, n.y, n.z))
+
+
 #: MonitorVerdict's float, count and name-list fields (besides level and message).
 _VERDICT_FLOATS = ("origin", "t", "since_last_sample", "largest_gap", "d", "d_time",
                    "distance_now", "first_collision_t", "approach_speed")
 _VERDICT_COUNTS = ("deployment", "samples", "refused", "skipped", "gaps")
+#: MonitorVerdict's counts that may be unknown or not apply (-1 in the message).
+_VERDICT_OPTIONAL = ("expected", "onsets")
 _VERDICT_NAMES = ("measured", "solved", "d_pair", "first_collision_pair")
 
 
 def verdict_message(level: int, text: str, values: dict) -> dict:
     """The fields of a ``MonitorVerdict`` message but its header, from a
     verdict's key-values (those of ``/diagnostics``): NaN, 0, -1 or an empty
-    list where a value is missing (-1: ``expected`` unknown)."""
+    list where a value is missing (-1: ``expected`` unknown, ``onsets`` not
+    checked: a model without panel contact)."""
     out = {"level": int(level), "message": text}
     out.update({k: _nan(values.get(k)) for k in _VERDICT_FLOATS})
     out.update({k: int(values.get(k) or 0) for k in _VERDICT_COUNTS})
     out.update({k: [str(x) for x in values.get(k) or ()] for k in _VERDICT_NAMES})
-    out["expected"] = -1 if values.get("expected") is None else int(values["expected"])
+    out.update({k: -1 if values.get(k) is None else int(values[k]) for k in _VERDICT_OPTIONAL})
     return out
 
 
@@ -287,7 +301,8 @@ def verdict_values(message) -> dict:
     out.update({k: list(getattr(message, k)) for k in _VERDICT_NAMES})
     for k in ("d_pair", "first_collision_pair"):
         out[k] = out[k] or None
-    out["expected"] = None if message.expected < 0 else int(message.expected)
+    out.update({k: None if getattr(message, k) < 0 else int(getattr(message, k))
+                for k in _VERDICT_OPTIONAL})
     return out
 
 
@@ -327,7 +342,7 @@ def _pair(text: str):
 
 
 #: How each key-value of an event, a verdict or an outcome reads back.
-_PARSERS = {"t": float, "approach_speed": float, "deployment": _integer, "origin": _number, "samples": _integer, "d": _number,
+_PARSERS = {"t": float, "approach_speed": float, "deployment": _integer, "onsets": _integer, "origin": _number, "samples": _integer, "d": _number,
             "d_pair": _pair, "d_time": _number, "distance_now": _number, "refused": _integer,
             "gaps": _integer, "skipped": _integer, "largest_gap": _number, "solved": lambda s: s.split(",") if s else [],
             "measured": lambda s: s.split(",") if s else [], "expected": _integer,

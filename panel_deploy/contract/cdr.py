@@ -1,4 +1,4 @@
-"""The wire form of the four messages a deployment sends at every sample, and of
+"""The wire form of the messages a deployment sends at every sample, and of
 ``/tf_static``: the one place they are built, for the dynamics node (which
 publishes these bytes as they are) and for recordings alike.
 
@@ -188,6 +188,7 @@ class SampleEncoder:
         self._panels = panels.compile()
         self._tf = self._transforms([(model.hinges[h].body_a, model.hinges[h].body_b)
                                      for h in model.joints])
+        self._onsets = {}  # contact pair index (-1: none) -> its ContactOnset layout
 
     def _transforms(self, pairs) -> Layout:
         """A TFMessage of one transform per (parent, child) body pair (-1: ``world``)."""
@@ -233,6 +234,25 @@ class SampleEncoder:
             out.append((self._clock.pack(stamp), self._joint_state.pack(js),
                         self._panels.pack(panels), self._tf.pack(tf)))
         return out
+
+    def onset(self, t: float, onset) -> bytes:
+        """``dynamics/contact_onsets`` bytes of the sample at ``t`` (s): ``onset``
+        is the row of ``SimulationResult.contact_onsets`` (``ONSET_COLUMNS``)
+        of the interval that ends there; pair -1 (no onset) gives empty names.
+        One layout per contact pair, built when the pair first comes to press."""
+        k = int(onset[2])
+        layout = self._onsets.get(k)
+        if layout is None:
+            layout = self._onsets[k] = Layout()
+            layout.header(self.prefix + WORLD)
+            a, b = self.model.contact_pairs[k] if k >= 0 else (None, None)
+            for body in (a, b):
+                layout.string("" if body is None else self.model.bodies[body].name)
+            for _ in range(8):   # t, speed, point x y z, normal x y z
+                layout.float64()
+            layout.compile()
+        t_onset, speed, _, *point_normal = np.asarray(onset, dtype=float).tolist()
+        return layout.pack((*_stamp(t), t_onset, speed, *point_normal))
 
     def tf(self, rotation, position, t: float) -> bytes:
         """``/tf`` bytes of one sample's body poses (as :meth:`encode` makes them)."""

@@ -29,6 +29,9 @@ class Sample(NamedTuple):
     torque: np.ndarray    #: N m
     rotation: np.ndarray  #: (nb, 3, 3) body orientations in the ground frame
     position: np.ndarray  #: (nb, 3) body centroids, m
+    #: The fastest panel contact onset since the last sample, a row of
+    #: ``SimulationResult.contact_onsets`` (pair -1: none)
+    onset: np.ndarray | None = None
 
 
 class Deployment:
@@ -64,7 +67,7 @@ class Deployment:
                 self.names = names
                 for j in range(len(block.t)):
                     yield Sample(float(block.t[j]), theta[j], omega[j], torque[j],
-                                 block.rotation[j], block.position[j])
+                                 block.rotation[j], block.position[j], block.contact_onsets[j])
                 if self.stopping.is_set():
                     self.stopped = True
                     return

@@ -13,8 +13,9 @@ stream had gaps, or when its coverage is lost: joint states that cannot
 arrive (a publisher of incompatible QoS), joint states all refused (another
 robot's names, a hinge the loop closure cannot complete), a deployment's
 stream stalled before the array is flat, or fewer samples checked than the
-dynamics node says it sent; every verdict carries that coverage (``measured``
-and ``solved`` hinges, ``expected`` samples, ``since_last_sample`` s); ERROR
+dynamics node says it sent, or for a model with panel contact, sample intervals
+whose contact onsets did not come; every verdict carries that coverage (``measured``
+and ``solved`` hinges, ``expected`` samples, ``onsets``, ``since_last_sample`` s); ERROR
 after a collision; four times a second and at the first
 event). A malformed message is skipped and counted; WARNs about it come at
 most once a second per kind, saying how many were held back.
@@ -74,6 +75,8 @@ DRAIN = 500
 #: state (or this many typical intervals, when longer) before the array is flat.
 STALL_S = 0.5
 STALL_INTERVALS = 20.0
+#: What the worker's queue holds: a joint state, a contact onset, the driver's sample count.
+_JOINT_STATE, _ONSET, _EXPECTED = "joint state", "onset", "expected"
 #: The scene's collision keys a parameter overrides when it holds no "the scene's" value.
 _OVERRIDES = {"tolerance": lambda v: v >= 0, "noise": lambda v: v >= 0,
               "speed_interval": lambda v: v >= 0, "stamps": bool, "refine": lambda v: True,
@@ -94,6 +97,8 @@ class CollisionMonitorNode(Node):
         self.verdicts = runtime.publisher(self, contract.VERDICT)
         self.markers = runtime.publisher(self, contract.COLLISION_MARKERS)
         runtime.subscription(self, contract.MODEL, self._on_model)
+        # Impacts the panel contact absorbed, which joint states cannot show.
+        self._onsets = runtime.subscription(self, contract.CONTACT_ONSETS, self._on_onset)
         self._joint_states = runtime.subscription(
             self, contract.JOINT_STATES, self._on_joint_state,
             event_callbacks=SubscriptionEventCallbacks(incompatible_qos=self._on_incompatible_qos))
@@ -102,6 +107,8 @@ class CollisionMonitorNode(Node):
         self._dynamics = contract.status_name(self.get_namespace(), contract.DEPLOY.node)
         self._expected = None      # samples of the current deployment, when its driver says
         self._arrived = None       # monotonic s of the last joint state checked
+        self._started = None       # monotonic s of the current deployment's first one
+        self._onset_arrived = None  # monotonic s of its last contact onset checked
         self._qos_fault = None     # why joint states cannot arrive at all
         runtime.trigger_service(self, contract.RESET, self._reset)
         self._throttle = Throttle()
@@ -187,9 +194,19 @@ class CollisionMonitorNode(Node):
             return self._refuse(stream, e)
         if self._receipt:  # when it left the driver, else when it arrived: not when handled
             t = (info["source_timestamp"] or info["received_timestamp"]) * 1e-9
+        self._queue(_JOINT_STATE, (stream, t, names, position, velocity,
+                                   info["received_timestamp"]))
+
+    def _on_onset(self, msg):
+        stream = self.stream
+        if stream is not None:
+            self._queue(_ONSET, (stream, messages.seconds(msg.header.stamp),
+                                 contract.onset_fields(msg)))
+
+    def _queue(self, kind, item):
+        """Hand ``item`` to the worker, in arrival order with the others."""
         with self._queued:
-            self._pending.append((stream, t, names, position, velocity,
-                                  info["received_timestamp"]))
+            self._pending.append((kind, item))
             self._queued.notify()
 
     def _refuse(self, stream, e):
@@ -213,15 +230,18 @@ class CollisionMonitorNode(Node):
                 batch = list(self._pending)
                 self._pending.clear()
             with self._lock:
-                newest = max((i for i, item in enumerate(batch) if not isinstance(item, int)),
+                newest = max((i for i, (kind, _) in enumerate(batch) if kind == _JOINT_STATE),
                              default=-1)
-                for i, item in enumerate(batch):
-                    if isinstance(item, int):  # the driver's sample count, in its place
+                for i, (kind, item) in enumerate(batch):
+                    if kind == _EXPECTED:  # the driver's sample count, in its place
                         self._expected = item
                         continue
-                    stream, t, *sample, received = item
-                    if stream is not self.stream:
+                    if item[0] is not self.stream:
                         continue  # read against a model that has since been replaced
+                    if kind == _ONSET:
+                        self._check_onset(*item)
+                        continue
+                    stream, t, *sample, received = item
                     late = (self._max_lag > 0 and received and i < newest
                             and (time.time_ns() - received) * 1e-9 > self._max_lag)
                     if not (late and stream.skip(t, self._skip_span)):
@@ -237,12 +257,26 @@ class CollisionMonitorNode(Node):
         self._arrived, self._qos_fault = time.monotonic(), None
         if stream.deployments != deployments:
             self._clear_markers()
-            self._expected = None
+            self._expected = self._onset_arrived = None
+            self._started = self._arrived
         if stream.last_gap is not None:
             self._warn("gap", f"gap of {stream.last_gap * 1e3:.1f} ms in joint_states before "
                               f"t = {t - stream.origin:.4f} s (typical interval "
                               f"{stream.typical_interval * 1e3:.2f} ms): collisions in it are "
                               f"located on interpolated motion")
+        self._publish_events(stream, found, theta, t)
+
+    def _check_onset(self, stream, stamp, fields):
+        try:
+            found = stream.onset(stamp, *fields)
+        except PanelDeployError as e:
+            return self._refuse(stream, e)
+        self._onset_arrived = time.monotonic()
+        self._publish_events(stream, found, stream.last_theta, stream.last_stamp)
+
+    def _publish_events(self, stream, found, theta, t):
+        """The collision events one message revealed, the first one's pair
+        highlighted on the array at ``theta`` (rad) and time ``t`` (s)."""
         if found:
             first = found[0] is stream.check.first_events[0]
             R, p = forward_kinematics(stream.model, theta)
@@ -280,9 +314,7 @@ class CollisionMonitorNode(Node):
                 if samples is not None:
                     # Queued behind the joint states read before it: the worker takes it
                     # after them, so a deployment it has yet to start cannot clear it.
-                    with self._queued:
-                        self._pending.append(samples)
-                        self._queued.notify()
+                    self._queue(_EXPECTED, samples)
 
     def _on_incompatible_qos(self, event):
         policy = getattr(event.last_policy_kind, "name", str(event.last_policy_kind))
@@ -298,7 +330,7 @@ class CollisionMonitorNode(Node):
                 self._send_verdict()
 
     def _send_verdict(self):
-        level, text, values = self.stream.verdict()
+        level, text, values = self.stream.verdict(self._onsets_in_flight())
         coverage = self._coverage()
         if coverage is not None and level < 2:
             level, text = 1, (f"{text}; {coverage}" if level == 1 else coverage)
@@ -309,6 +341,13 @@ class CollisionMonitorNode(Node):
         self.diagnostics.publish(messages.diagnostics(
             stamp, messages.status(self.status_name, level, text, values,
                                    hardware_id=self.get_namespace().strip("/") or "panel_array")))
+
+    def _onsets_in_flight(self) -> bool:
+        """Contact onsets may still be coming: a driver publishes them, and one
+        came (or the deployment started) less than STALL_S s ago."""
+        last = self._onset_arrived or self._started
+        return (self._onsets.get_publisher_count() > 0 and last is not None
+                and time.monotonic() - last < STALL_S)
 
     def _coverage(self) -> str | None:
         """Why the last verdict covers less than it should, or None: joint states that
@@ -349,7 +388,8 @@ class CollisionMonitorNode(Node):
             self._pending.clear()
         with self._lock:
             self.stream.reset()
-        self._qos_fault = self._expected = self._arrived = None
+        self._qos_fault = self._expected = self._arrived = self._started = None
+        self._onset_arrived = None
         self._clear_markers()
         response.success, response.message = True, "the next joint state starts a new deployment"
         return response

@@ -5,7 +5,9 @@ deploys the model last received on ``panel_deploy/model`` with the current
 parameters, after waiting (at most 30 s) for the goal's number of
 ``joint_states`` subscribers; samples go out on ``joint_states`` and
 ``/clock`` as they are computed, ``rate_hz`` per simulated second, paced by
-``real_time_factor``, stamped with simulated time; ``panel_deploy/panels``
+``real_time_factor``, stamped with simulated time (for a model with panel
+contact each with its interval's fastest contact onset on
+``dynamics/contact_onsets``, which joint states cannot show); ``panel_deploy/panels``
 follows at a display rate, the feedback ten times a second. The outcome is
 the goal's result (its summary, as ``panel-deploy simulate --json`` prints
 it, included) and a status on ``/diagnostics``; a goal that cannot run (one
@@ -67,6 +69,7 @@ class DynamicsNode(runtime.WorkerNode):
         super().__init__("dynamics", **kwargs)
         runtime.declare(self, PARAMETERS, self._check)
         self.joint_states = runtime.publisher(self, contract.JOINT_STATES)
+        self.onsets = runtime.publisher(self, contract.CONTACT_ONSETS)
         self.panels = runtime.publisher(self, contract.PANELS)
         self.clock = runtime.publisher(self, contract.CLOCK_TOPIC)
         self.diagnostics = runtime.publisher(self, contract.DIAGNOSTICS)
@@ -123,6 +126,7 @@ class DynamicsNode(runtime.WorkerNode):
         pacer = Pacer(params.real_time_factor, deployment.stopping)
         # The contract's own bytes, as recordings store them: published as they are.
         encoder = SampleEncoder(model, prefix)
+        contact = bool(model.contact_pairs)  # no panel contact: no onsets to send
         shown = told = -math.inf
         samples = 0
         self.tf_static.publish(encoder.tf_static())
@@ -132,6 +136,8 @@ class DynamicsNode(runtime.WorkerNode):
             (clock, joint_state, panels, tf), = encoder.encode([s])
             self.clock.publish(clock)
             self.joint_states.publish(joint_state)
+            if contact:
+                self.onsets.publish(encoder.onset(s.t, s.onset))
             samples += 1
             self.tf.publish(tf)
             # Markers and feedback are for eyes and progress bars: a display rate is enough.

@@ -166,8 +166,8 @@ class Driver(Node):
         if not result.summary:  # the deployment did not run or failed with an error
             raise RuntimeError(result.message)
         published = result.samples
-        self._wait(lambda: (self.verdict or {}).get("samples", 0) >= published,
-                   "the collision monitor", interruptible=interruptible)
+        self._wait(lambda: self._checked(published), "the collision monitor",
+                   interruptible=interruptible)
         self.summarise(json.loads(result.summary))
         if self.recorder is not None:
             got = self.recorder.received
@@ -176,6 +176,13 @@ class Driver(Node):
                        "the recorder", interruptible=interruptible)
             time.sleep(0.2)  # the monitor's last events and verdict, published just now
             self.recorder.close(self.summary)
+
+    def _checked(self, published: int) -> bool:
+        """The monitor has checked the ``published`` samples, and for a model with
+        panel contact their intervals' contact onsets."""
+        v = self.verdict or {}
+        return v.get("samples", 0) >= published and (v.get("onsets") is None
+                                                     or v["onsets"] >= published - 1)
 
     def summarise(self, s: dict) -> None:
         """The deployment's summary ``s`` (the Deploy result's) with the monitor's

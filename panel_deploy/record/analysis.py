@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 from .. import contract
 from ..errors import PanelDeployError, SceneError, TrajectoryError
-from .reader import (HingeTrack, JointStates, Recording, hinge_track, joint_states,
-                     open_recording)
+from .reader import (HingeTrack, JointStates, Recording, contact_onsets, hinge_track,
+                     joint_states, open_recording)
 
 
 @dataclass
@@ -26,6 +26,8 @@ class RecordedDeployment:
     model: object
     track: HingeTrack
     states: JointStates  #: every joint of the joint states, as recorded
+    #: Each joint state's contact onset (:func:`~.reader.contact_onsets`), or None.
+    onsets: list
     #: What the reader noticed (a truncated file, times counted from a first
     #: stamp): for stderr once the command has done its work, so that a
     #: command that fails prints one line only.
@@ -97,7 +99,8 @@ def read_deployment(path, scene: str | None = None, namespace: str | None = None
     if track.t0:
         notes.append(f"times are counted from the first {recording.topic(contract.JOINT_STATES)} "
                      f"stamp, {track.t0:.9f} s")
-    return RecordedDeployment(recording, parsed, model, track, states, notes)
+    onsets = contact_onsets(recording, states, parsed.collision.stamps)
+    return RecordedDeployment(recording, parsed, model, track, states, onsets, notes)
 
 
 def check_recording(d: RecordedDeployment):
@@ -105,7 +108,8 @@ def check_recording(d: RecordedDeployment):
     ``collision_monitor`` node does it on the same stream: message by
     message through :class:`~panel_deploy.collision.StreamCheck` with the
     scene's ``collision`` settings (noise, stamps, speed interval), hinges
-    the stream lacks solved from the loop closure, gaps counted.
+    the stream lacks solved from the loop closure, gaps counted, and each
+    joint state's contact onset beside it.
 
     Returns ``(stream, report)``: the StreamCheck (its :meth:`verdict`) and
     the first deployment's :class:`~panel_deploy.collision.check.CollisionReport`.
@@ -120,7 +124,8 @@ def check_recording(d: RecordedDeployment):
             break  # the stream starts again (a replay, the next run): one deployment is checked
         velocity = None if states.velocity is None else states.velocity[j]
         try:
-            stream.update_joints(float(t), states.names, states.position[j], velocity)
+            stream.update_joints(float(t), states.names, states.position[j], velocity,
+                                 d.onsets[j])
         except PanelDeployError as e:  # refused as the node refuses it: counted, skipped
             stream.refuse(str(e).split(":", 1)[0][:40])
     if stream.check is None:

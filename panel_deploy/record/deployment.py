@@ -83,15 +83,21 @@ def record_deployment(path, scene, model):
         check = StreamCheck(model, settings)
         n = model.n_coords
         encoder = SampleEncoder(model)
+        names = [(model.bodies[a].name, model.bodies[b].name) for a, b in model.contact_pairs]
         for batch in _batches(deployment, BATCH):
             for s, (clock, joint_state, panels, tf) in zip(batch, encoder.encode(batch)):
                 ns = m.nanoseconds(s.t)
                 rec.write(contract.CLOCK_TOPIC, clock, ns)
                 rec.write(contract.JOINT_STATES, joint_state, ns)
+                if names:
+                    rec.write(contract.CONTACT_ONSETS, encoder.onset(s.t, s.onset), ns)
                 rec.write(contract.PANELS, panels, ns)
                 rec.write(contract.TF, tf, ns)
                 if check.check is None or not check.check.collided:
-                    events = check.update(s.t, s.theta[:n], s.omega[:n])
+                    k = int(s.onset[2])  # the onset's fields as dynamics/contact_onsets has them
+                    onset = (*(names[k] if k >= 0 else ("", "")), s.onset[0], s.onset[1],
+                             s.onset[3:6], s.onset[6:9]) if names else None
+                    events = check.update(s.t, s.theta[:n], s.omega[:n], onset)
                     if events:
                         for e in events:
                             rec.write(contract.COLLISION_EVENTS, m.collision_event(e), ns)

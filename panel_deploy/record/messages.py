@@ -20,9 +20,9 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from .. import contract
 from ..contract import nanoseconds
 # The contract's type names and levels, here too for readers of recordings (m.JOINT_STATE).
-from ..contract import (CLOCK, COLLISION_EVENT, DIAGNOSTIC_ARRAY, ERROR,  # noqa: F401
-                        JOINT_STATE, MARKER_ARRAY, MONITOR_VERDICT, HIT_COLOUR, OK, PANEL_COLOUR,
-                        STRING, TF_MESSAGE, WARN, WORLD)
+from ..contract import (CLOCK, COLLISION_EVENT, CONTACT_ONSET, DIAGNOSTIC_ARRAY,  # noqa: F401
+                        ERROR, JOINT_STATE, MARKER_ARRAY, MONITOR_VERDICT, HIT_COLOUR, OK,
+                        PANEL_COLOUR, STRING, TF_MESSAGE, WARN, WORLD)
 from ..frames import quaternions
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)

@@ -386,6 +386,28 @@ def joint_states(recording: Recording, stamps: str = "header") -> JointStates:
                        np.array([log_time for log_time, _ in logged], dtype=float) * 1e-9)
 
 
+def contact_onsets(recording: Recording, states: JointStates, stamps: str = "header") -> list:
+    """The contact onset the recording's ``dynamics/contact_onsets`` gives for
+    each joint state of ``states`` (matched by its time: header stamp, or log
+    time with ``stamps`` "receipt"), as the fields
+    :meth:`~panel_deploy.collision.StreamCheck.onset` takes; None for a joint
+    state with none (a recording of a model without panel contact, or of a
+    real array, has none at all).
+
+    Raises
+    ------
+    TrajectoryError
+        The topic holds messages that do not decode as ``ContactOnset``.
+    """
+    topic = recording.topic(contract.CONTACT_ONSETS)
+    if not recording.count(topic):
+        return [None] * len(states.t)
+    by_time = {(messages.seconds(msg.header.stamp) if stamps == "header" else log_time * 1e-9):
+               contract.onset_fields(msg)
+               for log_time, msg in recording.messages(topic, contract.CONTACT_ONSET)}
+    return [by_time.get(float(t)) for t in states.t]
+
+
 def _order(given, names, where):
     given = list(given)
     if sorted(given) != sorted(names):

@@ -80,17 +80,16 @@ def collision_events(d: RecordedDeployment):
     """``(distance, events)``: the smallest distance (m) at every sample up to
     the first collision (nan after it: the motion is no longer physical), and
     that collision's events (every pair colliding at the sample that reveals
-    it), as ``collide`` finds them."""
-    from ..collision import CollisionSettings
-    from ..collision.check import TrajectoryCheck
+    it), as ``collide`` finds them, contact onsets included."""
+    from ..collision import CollisionSettings, StreamCheck
 
-    check = TrajectoryCheck(d.model, CollisionSettings.from_scene(d.scene), capacity=len(d.track.t))
+    stream = StreamCheck(d.model, CollisionSettings.from_scene(d.scene))
     distance = np.full(len(d.track.t), np.nan)
-    for j, t in enumerate(d.track.t):
-        if check.update(t, d.track.theta[j], d.track.omega[j]):
+    for j, t in enumerate(d.states.t):  # the stamps' clock, which the onsets' times are in
+        if stream.update(float(t), d.track.theta[j], d.track.omega[j], d.onsets[j]):
             break
-        distance[j] = check.monitor.min_distance
-    return distance, check.first_events
+        distance[j] = stream.check.monitor.min_distance
+    return distance, stream.check.first_events
 
 
 def recorded_monitor(d: RecordedDeployment) -> list:

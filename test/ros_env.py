@@ -12,8 +12,12 @@ PROFILE = Path(__file__).resolve().parent.parent / "config" / "fastdds_loopback.
 
 
 def isolate(domain: int | None = None) -> None:
+    """``domain``, else ``PANEL_DEPLOY_TEST_DOMAIN`` (two runs at once, as CI's two
+    Pythons, name theirs), else one from this process's id."""
+    if domain is None:
+        domain = int(os.environ.get("PANEL_DEPLOY_TEST_DOMAIN") or 1 + os.getpid() % 100)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.pop("ROS_LOCALHOST_ONLY", None)
-    os.environ["ROS_DOMAIN_ID"] = str(domain if domain is not None else 1 + os.getpid() % 100)
+    os.environ["ROS_DOMAIN_ID"] = str(domain)
     os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(PROFILE)
     os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")

@@ -1,7 +1,7 @@
 """The O(n) path (articulated-body algorithm, structured W-solve) against the
 dense one (CRBA mass matrix, numpy solves, dense Jacobian blocks): a random
-branched tree with hinges in contact, and the penalty-closed 5 x 6 packing of
-issue 33 (26 coordinates, one cut hinge)."""
+branched tree with hinges in contact, and the 5 x 6 packing of issue 33 (26
+coordinates, one cut hinge) closed by penalty and exactly."""
 
 from pathlib import Path
 
@@ -11,7 +11,7 @@ from scipy.integrate import solve_ivp
 
 from panel_deploy.build import build_model
 from panel_deploy.dynamics import articulated, kernels, rosenbrock, simulate
-from panel_deploy.dynamics.pack import PENALTY, TREE, pack
+from panel_deploy.dynamics.pack import EXACT, PENALTY, TREE, pack
 from panel_deploy.model import AirParameters, Body, Model, State, box_inertia
 from panel_deploy.scene import SimulationSection, load_scene
 
@@ -37,13 +37,14 @@ def random_tree(n=24, seed=0):
                        air=AirParameters(1.2, 1.17))
 
 
-def packing_5x6():
-    """The 5 x 6 first packing circuit of bench/bench_scaling.py, penalty closure."""
-    sets = ["array.rows=5", "array.cols=6", "fold.circuit=3", "fold.ground=null"]
+def packing_5x6(closure="penalty"):
+    """The 5 x 6 first packing circuit of bench/bench_scaling.py."""
+    sets = ["array.rows=5", "array.cols=6", "fold.circuit=3", "fold.ground=null",
+            f"closure.method={closure}"]
     return build_model(load_scene(SCENE, sets))
 
 
-MODELS = {"tree": random_tree, "5x6": packing_5x6}
+MODELS = {"tree": random_tree, "5x6": packing_5x6, "5x6 exact": lambda: packing_5x6("exact")}
 
 
 @pytest.fixture(scope="module", params=list(MODELS))
@@ -63,8 +64,9 @@ def states(model, count, seed=1, spread=0.05):
 
 def test_models_take_the_articulated_path(model):
     P = pack(model)
-    assert articulated.applies(P.method, P.n)
-    assert P.method == (PENALTY if model.cut_hinges else TREE)
+    assert articulated.applies(P.n)
+    assert P.method == (TREE if not model.cut_hinges else
+                        PENALTY if model.closure.method == "penalty" else EXACT)
 
 
 def test_factor_solve_and_product_are_the_dense_ones(model):
@@ -121,25 +123,51 @@ def test_factor_reports_a_singular_mass_matrix():
     assert np.all(np.isnan(kernels.rhs(P, y)))
 
 
+def dense_dynamics(P, y):
+    """qdd and the constraint forces' power by numpy: ``M^-1 Q`` from the CRBA mass
+    matrix, plus for the exact closure ``M^-1 J^T lambda`` with lambda from
+    ``J qdd = -gamma - 2 cdot / T - c / T^2`` (Baumgarte), J M^-1 J^T regularised
+    as the package does."""
+    n = P.n
+    M, Q, (R, p, w, vo, S), acc, _, dissipation, _ = kernels.mass_and_bias(P, y[:n], y[n:2 * n])
+    qdd = np.linalg.solve(M, Q)
+    if P.method != EXACT:
+        return qdd, dissipation, 0.0
+    c, J, gamma = kernels.closure_jacobian(P, R, p, w, vo, S, acc)
+    Y = np.linalg.solve(M, J.T)
+    G = J @ Y
+    G += np.eye(len(c)) * (P.regularisation * np.diag(G).max() + 1e-300)
+    T = P.baumgarte
+    cdot = J @ y[n:2 * n]
+    lam = np.linalg.solve(G, -gamma - 2.0 / T * cdot - c / T ** 2 - J @ qdd)
+    return qdd + Y @ lam, dissipation, lam @ cdot
+
+
 def test_rhs_is_the_dense_solve(model):
-    """The ABA forward dynamics against ``M^-1 Q`` from the CRBA mass matrix, with
-    the dissipation and the closure work rows unchanged."""
+    """The ABA forward dynamics, exact closure included, against numpy's dense
+    solves, with the dissipation and the closure work rows."""
     P = pack(model)
     n = P.n
     for y in states(model, 4):
-        M, Q, *_, dissipation, _ = kernels.mass_and_bias(P, y[:n], y[n:2 * n])
+        qdd, dissipation, power = dense_dynamics(P, y)
         f = kernels.rhs(P, y)
-        qdd = np.linalg.solve(M, Q)
-        assert np.abs(f[n:2 * n] - qdd).max() < 1e-10 * np.abs(qdd).max()
+        assert np.abs(f[n:2 * n] - qdd).max() < 1e-9 * np.abs(qdd).max()
         assert np.array_equal(f[:n], y[n:2 * n])
-        assert f[2 * n] == dissipation and f[2 * n + 1] == 0.0
+        assert f[2 * n] == dissipation
+        assert f[2 * n + 1] == pytest.approx(power, rel=1e-8, abs=1e-12)
+        assert (power != 0.0) == (P.method == EXACT)
 
 
 @pytest.mark.parametrize("h", [1e-5, 1e-4, 1e-3])
 def test_structured_w_step_is_the_dense_step(model, h):
     """One ROS34PW2 step with the O(n) W-solve against the step with the dense blocks
-    A = -M^-1 K, B = -M^-1 C of the same K, C (kernels.stiff_jacobian)."""
+    A = -M^-1 K, B = -M^-1 C of the same K, C (kernels.stiff_jacobian). (For the
+    exact closure the dense blocks add the constraint's projection, which the
+    O(n) W leaves out: a W-method's order does not depend on its matrix; the
+    simulation test below checks that path.)"""
     P = pack(model)
+    if P.method == EXACT:
+        pytest.skip("the dense blocks of the exact closure are another W")
     N = 2 * P.n + 2
     for y in states(model, 3):
         f = kernels.rhs(P, y)
@@ -157,12 +185,12 @@ def test_structured_w_step_is_the_dense_step(model, h):
 
 
 def dense_rhs(P):
-    """The deployment ODE with the dense mass-matrix solve, for scipy."""
+    """The deployment ODE with numpy's dense solves (:func:`dense_dynamics`), for scipy."""
     n = P.n
 
     def fun(t, y):
-        M, Q, *_, dissipation, _ = kernels.mass_and_bias(P, y[:n], y[n:2 * n])
-        return np.concatenate([y[n:2 * n], np.linalg.solve(M, Q), [dissipation, 0.0]])
+        qdd, dissipation, power = dense_dynamics(P, y)
+        return np.concatenate([y[n:2 * n], qdd, [dissipation, power]])
     return fun
 
 

@@ -136,8 +136,11 @@ def test_malformed_joint_states_warn_and_the_verdict_stays_right(graph, deployme
     feed(publisher, model, result, range(j, n))
     wait_for(lambda: events, what="the collision after the bad messages")
     wait_checked(diagnostics, n)  # done with this deployment: the next test starts clean
-    assert (events[0].body_a, events[0].body_b) == report.first_collision.names
-    assert abs(events[0].t - report.first_collision.t) <= result.t[1] - result.t[0]
+    # The earliest: under load the last deployment's later events (it goes on checking
+    # after its first collision) can arrive after the clear above.
+    first = min(events, key=lambda e: e.t)
+    assert (first.body_a, first.body_b) == report.first_collision.names
+    assert abs(first.t - report.first_collision.t) <= result.t[1] - result.t[0]
 
 
 def test_reset_starts_a_new_deployment(graph, deployment):
@@ -145,8 +148,10 @@ def test_reset_starts_a_new_deployment(graph, deployment):
     model, result, report = deployment
     markers.clear()
     assert client.trigger("/collision_monitor/reset").success
-    wait_for(lambda: markers, what="the markers cleared")  # the last collision's are off displays
-    assert [m.action for m in markers[0].markers] == [Marker.DELETEALL]
+    # The last collision's markers go off displays (under load, markers the last
+    # deployment's later events sent can arrive after the clear above).
+    wait_for(lambda: any([m.action for m in a.markers] == [Marker.DELETEALL] for a in markers),
+             what="the markers cleared")
     diagnostics.clear()
     feed(publisher, model, result, range(20))  # before the collision: OK again
     wait_checked(diagnostics, 20)

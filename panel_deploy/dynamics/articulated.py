@@ -20,8 +20,6 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .pack import EXACT
-
 #: Coordinates from which the O(n) path is taken. Measured, stiff Jacobian plus
 #: one ROS34PW2 step (3 rhs calls), compiled loops: 16 us dense against 20 us
 #: O(n) on the paper scene (11 coordinates), 40 against 33 us on the 5 x 6
@@ -30,13 +28,11 @@ MIN_N = 20
 
 
 @njit(cache=True)
-def applies(method, n):
-    """Whether the rhs and the W-solves of a model (``Packed.method``, ``Packed.n``)
-    take the O(n) path: a tree or a penalty closure (whose cut forces are
-    wrenches like any other) of at least MIN_N coordinates. The exact closure
-    needs ``M^-1 J^T`` and keeps the dense path. (Scalars, not the Packed
-    tuple: passing that to a function costs a reference count per array.)"""
-    return method != EXACT and n >= MIN_N
+def applies(n):
+    """Whether the rhs and the W-solves of a model of n coordinates
+    (``Packed.n``) take the O(n) path: at least MIN_N. (A scalar, not the
+    Packed tuple: passing that to a function costs a reference count per array.)"""
+    return n >= MIN_N
 
 
 @njit(cache=True)

@@ -468,7 +468,7 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
     :func:`integrate_blocks`)."""
     scheme = choose_scheme(P, y0) if name == "compiled" else name
     key = SCHEMES[scheme]
-    if key == ROS34PW2 and articulated.applies(P.method, P.n):
+    if key == ROS34PW2 and articulated.applies(P.n):
         key = ROS34PW2_TERMS
     loop = COMPILED_LOOPS[key]
     s, N = len(t_eval), len(y0)

@@ -12,14 +12,14 @@ spatial vectors in the ground frame about its origin, angular part first:
 * bias forces (velocity product, gravity, air drag, cut-hinge wrenches) by
   recursive Newton-Euler (RNEA) with zero joint acceleration, O(n);
 * ``M qdd = Q - b`` solved in O(n) by the articulated-body algorithm
-  (:mod:`.articulated`) for a tree or a penalty closure of at least
-  ``articulated.MIN_N`` coordinates; else the mass matrix by the
-  composite-rigid-body algorithm (CRBA, O(n d) for tree depth d) and Cholesky
-  (O(n^3)).
+  (:mod:`.articulated`) from ``articulated.MIN_N`` coordinates (the exact
+  closure's ``M^-1 J^T`` by one more solve per constraint row, five per cut
+  hinge); else the mass matrix by the composite-rigid-body algorithm (CRBA,
+  O(n d) for tree depth d) and Cholesky (O(n^3)).
 
 The dense path stays for small n, where its n^3 / 6 flops cost no more than
 the articulated path's 6 x 6 algebra (measured: equal at 11 coordinates, the
-paper scene), and for the exact closure, which needs ``M^-1 J^T``.
+paper scene).
 :func:`observe` (per sample, not per step) keeps the CRBA mass matrix for the
 kinetic energy.
 
@@ -544,24 +544,67 @@ def _cholesky_solve(L, X):
 
 @njit(cache=True)
 def _constraint_factor(L, J, regularisation):
-    """Y = M^-1 J^T and the Cholesky factor of the regularised J M^-1 J^T.
-
-    ``L`` is the Cholesky factor of M; the Tikhonov term, relative to the
-    largest diagonal entry, keeps the factorisation defined through rank loss
-    of the closure Jacobian (the stowed and flat-aligned singular states).
-    Returns ``(Y, LA, ok)``.
-    """
-    mc = J.shape[0]
+    """Y = M^-1 J^T and the Cholesky factor of the regularised J M^-1 J^T
+    (:func:`_closure_gram`); ``L`` is the Cholesky factor of M. Returns ``(Y, LA, ok)``."""
     Y = J.T.copy()
     _cholesky_solve(L, Y)
+    LA, ok = _closure_gram(J, Y, regularisation)
+    return Y, LA, ok
+
+
+@njit(cache=True)
+def _articulated_constraint_factor(P, S, UA, D, J, regularisation):
+    """:func:`_constraint_factor` with M factored by the articulated-body
+    algorithm (:func:`articulated.factor`'s (UA, D)): one O(n) solve per
+    constraint row, no n x n matrix."""
+    n, mc = P.n, J.shape[0]
+    Y = np.empty((n, mc))
+    column = np.empty(n)
+    work = np.empty((n + 1, 6))
+    for r in range(mc):
+        articulated.solve(P, S, UA, D, J[r], column, work)
+        Y[:, r] = column
+    LA, ok = _closure_gram(J, Y, regularisation)
+    return Y, LA, ok
+
+
+@njit(cache=True, inline='always')
+def _closure_gram(J, Y, regularisation):
+    """Cholesky factor of J Y + a Tikhonov term, relative to its largest
+    diagonal entry, which keeps it defined through rank loss of the closure
+    Jacobian (the stowed and flat-aligned singular states): ``(LA, ok)``."""
+    mc = J.shape[0]
     A = _matmul(J, Y)
     scale = 0.0
     for r in range(mc):
         scale = max(scale, A[r, r])
     for r in range(mc):
         A[r, r] += regularisation * scale + 1e-300
-    LA, ok = _cholesky(A)
-    return Y, LA, ok
+    return _cholesky(A)
+
+
+@njit(cache=True, inline='always')
+def _exact_closure(P, c, J, gamma, Y, LA, omega, qdd):
+    """Add to the tree's qdd (n,) the exact closure's Lagrange multiplier term
+    (Baumgarte-stabilised, time constant ``P.baumgarte``), from
+    :func:`closure_jacobian`'s (c, J, gamma) and :func:`_constraint_factor`'s
+    (Y, LA) however M was factored. Returns the constraint forces' power, W."""
+    n = P.n
+    T = P.baumgarte
+    cdot = _mv(J, omega)
+    lam = np.empty(J.shape[0])
+    for r in range(J.shape[0]):
+        s = 0.0
+        for k in range(n):
+            s += J[r, k] * qdd[k]
+        lam[r] = (-gamma[r] - (2.0 / T) * cdot[r] - c[r] / (T * T)) - s
+    _cholesky_solve(LA, lam.reshape((lam.shape[0], 1)))
+    for i in range(n):
+        s = 0.0
+        for r in range(J.shape[0]):
+            s += Y[i, r] * lam[r]
+        qdd[i] += s
+    return _dot(lam, cdot)
 
 
 @njit(cache=True, inline='always')
@@ -987,17 +1030,25 @@ def rhs(P, y):
     dy = np.empty(2 * n + 2)
     dy[:n] = omega
     dy[2 * n + 1] = 0.0
-    if articulated.applies(P.method, P.n):
+    if articulated.applies(P.n):
         kin = kinematics(P, theta, omega)
         R, p, _, _, S = kin
         Jb, hb = body_inertias(P, R, p)
-        Q, _, _, dissipation, _ = _bias(P, theta, omega, kin, Jb, hb)
+        Q, acc, _, dissipation, _ = _bias(P, theta, omega, kin, Jb, hb)
         dy[2 * n] = dissipation
         U, D, ok = articulated.factor(P, S, articulated.inertias(P, Jb, hb), np.zeros(n))
         if not ok:
             dy[:] = np.nan
             return dy
-        articulated.solve(P, S, U, D, Q, dy[n:2 * n], np.empty((n + 1, 6)))
+        qdd = dy[n:2 * n]
+        articulated.solve(P, S, U, D, Q, qdd, np.empty((n + 1, 6)))
+        if P.method == EXACT:
+            c, J, gamma = closure_jacobian(P, R, p, kin[2], kin[3], S, acc)
+            Y, LA, ok = _articulated_constraint_factor(P, S, U, D, J, P.regularisation)
+            if not ok:
+                dy[:] = np.nan
+                return dy
+            dy[2 * n + 1] = _exact_closure(P, c, J, gamma, Y, LA, omega, qdd)
         return dy
     M, qdd, kin, acc, _, dissipation, _ = mass_and_bias(P, theta, omega)
     dy[2 * n] = dissipation
@@ -1013,21 +1064,7 @@ def rhs(P, y):
         if not ok:
             dy[:] = np.nan
             return dy
-        T = P.baumgarte
-        cdot = _mv(J, omega)
-        lam = np.empty(J.shape[0])
-        for r in range(J.shape[0]):
-            s = 0.0
-            for k in range(n):
-                s += J[r, k] * qdd[k]
-            lam[r] = (-gamma[r] - (2.0 / T) * cdot[r] - c[r] / (T * T)) - s
-        _cholesky_solve(LA, lam.reshape((lam.shape[0], 1)))
-        for i in range(n):
-            s = 0.0
-            for r in range(J.shape[0]):
-                s += Y[i, r] * lam[r]
-            qdd[i] += s
-        dy[2 * n + 1] = _dot(lam, cdot)
+        dy[2 * n + 1] = _exact_closure(P, c, J, gamma, Y, LA, omega, qdd)
     dy[n:2 * n] = qdd
     return dy
 

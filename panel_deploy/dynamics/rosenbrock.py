@@ -29,7 +29,12 @@ added by the Woodbury identity: :func:`step_terms`, O(n r^2) per step with no
 n x n matrix formed (for many rows, as a pressed stack's contact points, the
 n x n matrix formed and factored instead), which the compiled loop takes where
 :func:`articulated.applies`; else :func:`step` with the dense blocks, an
-n x n LU per step.
+n x n LU per step. For the exact closure that W leaves out the constraint's
+projection of A and B (the dense blocks hold it): a W-method's order does not
+depend on its matrix, and the projection's own rates are the Baumgarte
+terms' (1 / T: 1e3 1/s at the default T = 1 ms), below those of the hinge
+stops and the panel contact that W holds (test_dynamics_articulated checks
+the path against a dense reference).
 """
 
 from __future__ import annotations

@@ -189,10 +189,23 @@ def test_cli_fold_rank_prints_the_ranking(capsys):
     assert [int(line.split()[1]) for line in lines[2:]] == [e["index"] for e in r["ranking"]]
 
 
+def test_cli_fold_rank_screens_to_the_end_time_asked(capsys):
+    code, out, _ = run(capsys, "fold", "--scene", PAPER, "--rank", "--candidates", "2", "--json",
+                       "--screen-t-end", "0.2")
+    r = json.loads(out)
+    assert code == 0 and r["settings"]["t_end"] == 0.2
+    # as at 0.3 s: circuit 0 collides at 0.15 s, circuit 1 has not by the end
+    assert [(e["index"], e["outcome"]) for e in r["ranking"]] == [(1, "no collision"),
+                                                                 (0, "collision")]
+
+
 @pytest.mark.parametrize("argv, expected", [
     (["fold", "--rows", "4", "--cols", "4", "--rank"], "--rank: needs --scene"),
     (["fold", "--rows", "4", "--cols", "4", "--candidates", "3"], "--candidates: only with --rank"),
     (["fold", "--scene", PAPER, "--rank", "--candidates", "0"], "--candidates: expected"),
+    (["fold", "--scene", PAPER, "--screen-t-end", "6"], "--screen-t-end: only with --rank"),
+    (["fold", "--scene", PAPER, "--rank", "--screen-t-end", "0"], "--screen-t-end: expected a number > 0"),
+    (["fold", "--scene", PAPER, "--rank", "--screen-t-end", "nan"], "--screen-t-end: expected a finite"),
 ])
 def test_cli_fold_rank_flags_are_checked(capsys, argv, expected):
     code, out, err = run(capsys, *argv)

@@ -84,6 +84,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "each (what fold.circuit: auto chooses from)")
     s.add_argument("--candidates", type=int, metavar="N",
                    help="with --rank: screen at most N packing circuits (default 8)")
+    s.add_argument("--screen-t-end", type=float, metavar="T",
+                   help="with --rank: screening end time, s (default 1; at most the scene's "
+                        "simulation.t_end): long enough to see slow deployments lie flat")
     add_set(s)
     s.set_defaults(func=_command("fold", "fold_command"))
 

@@ -129,8 +129,11 @@ def _fold(args):
         if args.plot:
             raise SceneError("--plot", "not with --rank (plot one circuit: --set fold.circuit=N)")
         _positive_int(args, "candidates", "--candidates", low=1)
-    elif getattr(args, "candidates", None) is not None:
-        raise SceneError("--candidates", "only with --rank (the circuits it screens)")
+        finite_number(getattr(args, "screen_t_end", None), "--screen-t-end", low=0, low_open=True)
+    else:
+        for attr, flag in (("candidates", "--candidates"), ("screen_t_end", "--screen-t-end")):
+            if getattr(args, attr, None) is not None:
+                raise SceneError(flag, "only with --rank (the circuits it screens)")
     if args.scene is not None:
         given = [flag for attr, flag in (("rows", "--rows"), ("cols", "--cols"),
                                          ("circuit", "--circuit"), ("limit", "--limit"))

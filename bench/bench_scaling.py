@@ -1,6 +1,6 @@
 """How the simulation and the collision check grow with the array (issue 33).
 
-    python bench/bench_scaling.py [--repeats N] [--out bench/results/scaling.txt]
+    python bench/bench_scaling.py [--repeats N] [--closure exact] [--out bench/results/scaling.txt]
 
 Scenes: the paper's 4 x 4 scene as it is, and the first circuit that packs of
 5 x 6, 6 x 6, 8 x 8 and 10 x 10, as issue 33 measured them
@@ -11,9 +11,10 @@ Scenes: the paper's 4 x 4 scene as it is, and the first circuit that packs of
 (``contact.panels=true``, every unhinged pair), without which their panels
 pass through each other in the stowed stacks within 0.02-0.06 s
 (docs/findings.md 3.2); the paper scene without, as it is.
-The circuits close one loop each (one cut hinge, penalty closure), so from
-5 x 6 on the dynamics take the O(n) articulated path with a rank-6 W-solve
-(``dynamics.articulated``); the paper scene (11 coordinates) the dense one.
+The circuits close one loop each (one cut hinge; the paper scene's penalty
+closure, or with ``--closure exact`` the exact one), so from 5 x 6 on the
+dynamics take the O(n) articulated path (``dynamics.articulated``); the paper
+scene (11 coordinates, always as it is) the dense one.
 
 Per scene (medians of ``--repeats`` runs, wall clock, 2 shared cores):
 - simulation: wall time per simulated second and per accepted step, and
@@ -73,14 +74,14 @@ def first_packing(rows: int, cols: int) -> int:
     return next(i for i, d in fold.designs(rows, cols) if d.stowed is not None)
 
 
-def scene_of(rows, cols, t_end):
-    """The scene of one case and its label."""
+def scene_of(rows, cols, t_end, closure):
+    """The scene of one case (a larger array's loop closed by ``closure``) and its label."""
     samples = [f"simulation.t_end={t_end}", f"simulation.samples={round(t_end / SAMPLE_INTERVAL) + 1}"]
     if rows is None:
         return load_scene(SCENE, samples), "4 x 4 paper"
     n = first_packing(rows, cols)
     sets = [f"array.rows={rows}", f"array.cols={cols}", f"fold.circuit={n}", "fold.ground=null",
-            "contact.panels=true"]
+            "contact.panels=true", f"closure.method={closure}"]
     return load_scene(SCENE, sets + samples), f"{rows} x {cols} circuit {n}"
 
 
@@ -126,8 +127,8 @@ def same(a, b) -> bool:
     return events and ra.v == rb.v and ra.d == rb.d and np.array_equal(ra.distances, rb.distances)
 
 
-def measure(rows, cols, t_end, repeats):
-    scene, label = scene_of(rows, cols, t_end)
+def measure(rows, cols, t_end, repeats, closure):
+    scene, label = scene_of(rows, cols, t_end, closure)
     model = build_model(scene)
     runs, cpu = [], []
     for _ in range(repeats):
@@ -196,11 +197,14 @@ def exponent(n, y) -> float:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--closure", choices=("penalty", "exact"), default="penalty",
+                    help="loop closure of the larger arrays (the paper scene keeps its own)")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "scaling.txt")
     args = ap.parse_args(argv)
     start = time.perf_counter()
-    rows = [measure(r, c, t, args.repeats) for r, c, t in CASES]
-    lines = [f"bench_scaling: medians of {args.repeats} runs, 2 shared cores, load average "
+    rows = [measure(r, c, t, args.repeats, args.closure) for r, c, t in CASES]
+    lines = [f"bench_scaling: larger arrays closed by {args.closure}; "
+             f"medians of {args.repeats} runs, 2 shared cores, load average "
              f"{open('/proc/loadavg').read().split()[0]}; n = bodies (after merging); "
              f"check times per sample up to the first collision, refinement on",
              "",

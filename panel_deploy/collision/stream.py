@@ -67,7 +67,9 @@ class StreamCheck:
     origin : float or None
         The current deployment's first stamp, s: its times count from here.
     refused : dict of str -> int
-        Messages refused in the current deployment, by field.
+        Joint states refused in the current deployment, by field.
+    refused_onsets : dict of str -> int
+        Contact onsets refused in the current deployment, by field.
     gaps : int
         Gaps in the current deployment.
     largest_gap : float
@@ -108,6 +110,7 @@ class StreamCheck:
         self.deployments = 0
         self.origin = None
         self.refused: dict = {}
+        self.refused_onsets: dict = {}
         self.gaps, self.largest_gap, self.last_gap = 0, 0.0, None
         self.solved: list = []
         self.measured: list = []
@@ -126,9 +129,11 @@ class StreamCheck:
         """Forget the current deployment: the next sample starts a new one."""
         self.check = None
 
-    def refuse(self, field: str) -> None:
-        """Count a message refused for ``field`` (the node's reading errors too)."""
-        self.refused[field] = self.refused.get(field, 0) + 1
+    def refuse(self, field: str, onset: bool = False) -> None:
+        """Count a joint state (or with ``onset`` a contact onset) refused for
+        ``field`` (the node's reading errors too)."""
+        counts = self.refused_onsets if onset else self.refused
+        counts[field] = counts.get(field, 0) + 1
 
     def skip(self, t: float, span: float) -> bool:
         """Leave the sample at stamp ``t`` (s) unchecked, counted in
@@ -241,7 +246,7 @@ class StreamCheck:
         self.check, self.origin, self._last = check, t, t
         self.last_theta = np.asarray(theta, dtype=float)
         self.deployments += 1
-        self.refused = {}
+        self.refused, self.refused_onsets = {}, {}
         self.gaps, self.largest_gap, self.last_gap = 0, 0.0, None
         self.skipped, self._skipping, self.onsets = 0, False, 0
         self._intervals.clear()
@@ -316,6 +321,11 @@ class StreamCheck:
         intervals = c.checked + self.skipped - 1
         if contacts:
             values["onsets"] = self.onsets
+        if self.refused_onsets:
+            worst = max(self.refused_onsets, key=self.refused_onsets.get)
+            values["refused_onsets"] = sum(self.refused_onsets.values())
+            faults.append(f"{values['refused_onsets']} contact onsets refused ({worst}: "
+                          f"{self.refused_onsets[worst]})")
         if contacts and not onsets_in_flight and self.onsets < intervals:
             # Joint states cannot show an impact the contact absorbed (issue 33).
             faults.append(

@@ -209,12 +209,12 @@ class CollisionMonitorNode(Node):
             self._pending.append((kind, item))
             self._queued.notify()
 
-    def _refuse(self, stream, e):
+    def _refuse(self, stream, e, onset=False):
         with self._lock:
-            stream.refuse(str(e).split(":", 1)[0][:40])
+            stream.refuse(str(e).split(":", 1)[0][:40], onset)
             # One kind per fault, whatever its values (names, numbers): a flood is throttled.
             kind = re.sub(r"'[^']*'|\d+(\.\d*)?(e[-+]?\d+)?", "#", str(e))[:80]
-            self._warn(kind, f"joint state skipped: {e}")
+            self._warn(kind, f"{'contact onset' if onset else 'joint state'} skipped: {e}")
 
     def _check_loop(self):
         """The worker: every joint state read so far, in order; above capacity
@@ -270,7 +270,7 @@ class CollisionMonitorNode(Node):
         try:
             found = stream.onset(stamp, *fields)
         except PanelDeployError as e:
-            return self._refuse(stream, e)
+            return self._refuse(stream, e, onset=True)
         self._onset_arrived = time.monotonic()
         self._publish_events(stream, found, stream.last_theta, stream.last_stamp)
 

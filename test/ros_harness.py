@@ -21,6 +21,10 @@ from panel_deploy import contract
 from panel_deploy.nodes import messages
 
 BIN = Path(sys.executable).parent
+#: s a request waits for its answer before it is sent again: one can be lost while
+#: the server has yet to discover this client's reply reader (a DDS race, seen once
+#: in CI under load: a Deploy goal to a dynamics node just started never answered).
+ANSWER = 10.0
 
 
 def executable(name: str) -> str:
@@ -95,11 +99,8 @@ class Client:
             self._clients[key] = self.node.create_client(srv_type, service)
         client = self._clients[key]
         assert client.wait_for_service(timeout_sec=timeout), f"{service} not available"
-        future = client.call_async(request if request is not None else srv_type.Request())
-        done = threading.Event()
-        future.add_done_callback(lambda _: done.set())
-        assert done.wait(timeout), f"{service} did not answer"
-        return future.result()
+        request = request if request is not None else srv_type.Request()
+        return _answered(lambda: client.call_async(request), timeout, service).result()
 
     def has_node(self, name):
         return name in self.node.get_node_names()
@@ -116,11 +117,9 @@ class Client:
         client = self._clients[key]
         assert client.wait_for_server(timeout_sec=timeout), f"{key[1]} not available"
         goal = Goal()
-        future = client.send_goal_async(action_type.Goal(**fields),
-                                        feedback_callback=lambda f: goal.feedback.append(f.feedback))
-        done = threading.Event()
-        future.add_done_callback(lambda _: done.set())
-        assert done.wait(timeout), f"{key[1]} did not answer"
+        future = _answered(lambda: client.send_goal_async(
+            action_type.Goal(**fields), feedback_callback=lambda f: goal.feedback.append(f.feedback)),
+            timeout, key[1])
         goal.start(future.result())
         return goal
 
@@ -142,6 +141,19 @@ class Client:
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
+
+
+def _answered(send, timeout, what):
+    """The future of ``send()``, sent again every ANSWER s until one is answered
+    (at most ``timeout`` s)."""
+    end = time.monotonic() + timeout
+    while True:
+        future = send()
+        done = threading.Event()
+        future.add_done_callback(lambda _: done.set())
+        if done.wait(max(0.0, min(ANSWER, end - time.monotonic()))):
+            return future
+        assert time.monotonic() < end, f"{what} did not answer"
 
 
 class Goal:

@@ -11,7 +11,7 @@ import pytest
 from panel_deploy.build import build_model
 from panel_deploy.collision import CollisionSettings, StreamCheck, check_trajectory
 from panel_deploy.collision.refine import MAX_DEPTH
-from panel_deploy.collision.stream import KEEP
+from panel_deploy.collision.stream import KEEP, onset_fields
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_states
 from panel_deploy.errors import TrajectoryError
@@ -303,13 +303,6 @@ def test_throttle_holds_back_and_counts():
     assert throttle("stamp") == 5
 
 
-def _onset_fields(model, row):
-    """A ``contact_onsets`` row as the fields of its ContactOnset message."""
-    k = int(row[2])
-    a, b = (model.bodies[i].name for i in model.contact_pairs[k]) if k >= 0 else ("", "")
-    return a, b, row[0], row[1], row[3:6], row[6:9]
-
-
 def test_a_stream_of_a_model_with_panel_contact_checks_its_contact_onsets():
     """With every pair of the paper scene in contact, r4c1 comes down on r4c4
     at ~0.09 m/s at 0.284 s and the contact holds them apart (test_contacts):
@@ -325,7 +318,7 @@ def test_a_stream_of_a_model_with_panel_contact_checks_its_contact_onsets():
     settings = CollisionSettings.from_scene(contact)
     batch = check_trajectory(model, result, settings)
     assert batch.first_collision.impact and set(batch.first_collision.names) == {"r4c1", "r4c4"}
-    fields = [_onset_fields(model, row) for row in result.contact_onsets]
+    fields = [onset_fields(model, row) for row in result.contact_onsets]
     beside, after = StreamCheck(model, settings), StreamCheck(model, settings)
     for j, t in enumerate(result.t):
         beside.update(t, result.theta[j], result.omega[j], fields[j])
@@ -351,7 +344,7 @@ def test_a_stream_of_a_model_with_panel_contact_checks_its_contact_onsets():
                                                     "simulation.samples=21"])
     model = build_model(clean)
     result = simulate(model, clean.simulation)
-    fields = [_onset_fields(model, row) for row in result.contact_onsets]
+    fields = [onset_fields(model, row) for row in result.contact_onsets]
     stream, first = _feed(model, CollisionSettings.from_scene(clean), result.t, result.theta,
                           result.omega)
     level, text, values = stream.verdict()

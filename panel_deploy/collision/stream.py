@@ -45,6 +45,14 @@ GAP_FACTOR = 5.0
 GAP_WINDOW = 16
 
 
+def onset_fields(model: Model, onset) -> tuple:
+    """The fields :meth:`StreamCheck.onset` takes (those of a ``ContactOnset``)
+    of a row of ``SimulationResult.contact_onsets``: pair -1 gives empty names."""
+    k = int(onset[2])
+    a, b = (model.bodies[i].name for i in model.contact_pairs[k]) if k >= 0 else ("", "")
+    return a, b, onset[0], onset[1], onset[3:6], onset[6:9]
+
+
 class StreamCheck:
     """Collision check of a joint-state stream, one deployment at a time.
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 from .. import contract
 from ..contract.cdr import SampleEncoder
 from ..collision import CollisionSettings, StreamCheck
+from ..collision.stream import onset_fields
 from ..dynamics.deployment import Deployment
 from ..errors import SceneError
 from ..export.urdf import model_urdf
@@ -83,20 +84,18 @@ def record_deployment(path, scene, model):
         check = StreamCheck(model, settings)
         n = model.n_coords
         encoder = SampleEncoder(model)
-        names = [(model.bodies[a].name, model.bodies[b].name) for a, b in model.contact_pairs]
         for batch in _batches(deployment, BATCH):
             for s, (clock, joint_state, panels, tf) in zip(batch, encoder.encode(batch)):
                 ns = m.nanoseconds(s.t)
                 rec.write(contract.CLOCK_TOPIC, clock, ns)
                 rec.write(contract.JOINT_STATES, joint_state, ns)
-                if names:
+                if model.contact_pairs:
                     rec.write(contract.CONTACT_ONSETS, encoder.onset(s.t, s.onset), ns)
                 rec.write(contract.PANELS, panels, ns)
                 rec.write(contract.TF, tf, ns)
                 if check.check is None or not check.check.collided:
-                    k = int(s.onset[2])  # the onset's fields as dynamics/contact_onsets has them
-                    onset = (*(names[k] if k >= 0 else ("", "")), s.onset[0], s.onset[1],
-                             s.onset[3:6], s.onset[6:9]) if names else None
+                    # as the monitor takes dynamics/contact_onsets
+                    onset = onset_fields(model, s.onset) if model.contact_pairs else None
                     events = check.update(s.t, s.theta[:n], s.omega[:n], onset)
                     if events:
                         for e in events:

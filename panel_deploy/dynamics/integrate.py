@@ -183,8 +183,9 @@ def _rms_norm(e, y0, y1, rtol, atol):
 
 
 @njit(cache=True)
-def _dopri5_step(P, y, f, h, K):
-    """One Dormand-Prince step of length h; returns (y1, err) and leaves rhs(y1) in K[6]."""
+def _dopri5_step(P, y, f, h, K, near=None):
+    """One Dormand-Prince step of length h; returns (y1, err) and leaves rhs(y1) in K[6]
+    (``near``: the run's candidate list, :func:`kernels.near_pairs`)."""
     N = y.shape[0]
     K[0] = f
     yi = np.empty(N)
@@ -194,14 +195,14 @@ def _dopri5_step(P, y, f, h, K):
             for q in range(st):
                 s += h * _A[st, q] * K[q, i]
             yi[i] = s
-        K[st] = kernels.rhs(P, yi)
+        K[st] = kernels.rhs(P, yi, near)
     y1 = np.empty(N)
     for i in range(N):
         s = y[i]
         for q in range(6):
             s += h * _B[q] * K[q, i]
         y1[i] = s
-    K[6] = kernels.rhs(P, y1)
+    K[6] = kernels.rhs(P, y1, near)
     err = np.empty(N)
     for i in range(N):
         s = 0.0
@@ -229,13 +230,14 @@ def onset_rows(P, y0, s):
 
 
 @njit(cache=True)
-def record_onsets(P, y, t, t_eval, j, pressed, onsets):
+def record_onsets(P, y, t, t_eval, j, pressed, onsets, near):
     """The contact onsets of the accepted step that ended at (t, y) into the
     row of the sample interval (t_{k-1}, t_k] that holds t, given j, the next
-    sample to fill (:func:`kernels.contact_onsets`)."""
+    sample to fill (:func:`kernels.contact_onsets`, with the run's candidate
+    list ``near``)."""
     k = j - 1 if t <= t_eval[j - 1] else j
     if k < t_eval.shape[0]:
-        kernels.contact_onsets(P, P.contact, y, t, pressed, onsets[k])
+        kernels.contact_onsets(P, P.contact, y, t, pressed, onsets[k], near)
 
 
 def _compiled_loop(scheme):
@@ -307,8 +309,9 @@ def _compiled_loop(scheme):
         landed = counts[5] != 0
         rejected = counts[6] != 0  # the last attempt was rejected by the error test
         expo = -1.0 / (rosenbrock.ERROR_ORDER if implicit else 5)
+        near = kernels.near_pairs(P, P.contact)
         if nfev == 0:
-            f = kernels.rhs(P, y)
+            f = kernels.rhs(P, y, near)
             nfev = 1
             # Hairer, Norsett & Wanner (II.4) starting step
             sc = np.empty(N)
@@ -334,19 +337,19 @@ def _compiled_loop(scheme):
             if implicit:
                 if not fresh:
                     if structured:
-                        jac = rosenbrock.terms(P, y)
+                        jac = rosenbrock.terms(P, y, near)
                     else:
-                        A, B, ok = kernels.stiff_jacobian(P, y)
+                        A, B, ok = kernels.stiff_jacobian(P, y, near)
                     njev += 1
                     fresh = True
                 if structured:
-                    y1, err, ok = rosenbrock.step_terms(P, y, f, step, jac, K)
+                    y1, err, ok = rosenbrock.step_terms(P, y, f, step, jac, K, near)
                 else:
-                    y1, err, ok = rosenbrock.step(P, y, f, step, A, B, K)
+                    y1, err, ok = rosenbrock.step(P, y, f, step, A, B, K, near)
                 nfev += 3
                 nlu += 1
             else:
-                y1, err = _dopri5_step(P, y, f, step, K)
+                y1, err = _dopri5_step(P, y, f, step, K, near)
                 nfev += 6
             en = _rms_norm(err, y, y1, rtol, atol)
             if not math.isfinite(en):
@@ -366,7 +369,7 @@ def _compiled_loop(scheme):
                 t = target if lands else t + step
                 y = y1
                 if implicit:
-                    f = kernels.rhs(P, y)
+                    f = kernels.rhs(P, y, near)
                     nfev += 1
                     fresh = False
                     while j < s and t_eval[j] <= t:
@@ -379,7 +382,7 @@ def _compiled_loop(scheme):
                     if lands:
                         Y[j] = y
                         j += 1
-                record_onsets(P, y, t, t_eval, j, pressed, onsets)
+                record_onsets(P, y, t, t_eval, j, pressed, onsets, near)
                 nsteps += 1
                 if gap_limit > 0.0 and max_gap(P, y) > gap_limit:
                     status, code = -1, 3
@@ -521,10 +524,11 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
     cls = getattr(scipy.integrate, name)
     n, N = P.n, len(y0)
     counts = {"nfev": 0, "njev": 0}
+    near = kernels.near_pairs(P, P.contact)
 
     def fun(t, y):
         counts["nfev"] += 1
-        return kernels.rhs(P, y)
+        return kernels.rhs(P, y, near)
 
     def jac(t, y):
         counts["njev"] += 1
@@ -585,7 +589,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
             while j < len(t_eval) and t_eval[j] <= solver.t:
                 out.append(sol(t_eval[j]))
                 j += 1
-            record_onsets(P, solver.y, solver.t, t_eval, j, pressed, onsets)
+            record_onsets(P, solver.y, solver.t, t_eval, j, pressed, onsets, near)
             if gap_limit > 0 and max_gap(P, solver.y) > gap_limit:
                 status = Status.GAP_EXCEEDED
                 message = (f"loop-closure gap {max_gap(P, solver.y):.3g} m exceeded the limit "

@@ -845,6 +845,79 @@ def _pair_apart(contact, r, box):
     return False
 
 
+#: Margin of the candidate list of panel contact pairs (:func:`near_pairs`),
+#: m: a pair is listed while its boxes are less than this apart, and the list
+#: is rebuilt once any box corner has moved half of it. Measured on the 10 x
+#: 10 array (3569 pairs, panels 0.1 m): 5 mm lists 30-330 pairs and is rebuilt
+#: every ~10 right-hand sides in the stowed stacks.
+NEAR_MARGIN = 0.005
+
+
+@njit(cache=True)
+def near_pairs(P, contact):
+    """An empty candidate list of the pairs of ``contact`` (``P.contact``, passed
+    apart so that numba prunes it for None) for :func:`rhs`:
+    (boxes it was built at (n + 1, 2, 3), NaN until its first use; the listed
+    pairs' rows (q,); their count (1,)). Mutable scratch of one run, never
+    shared between runs: it only spares :func:`panel_contacts` the box test
+    of pairs that cannot touch, so a run gives the same result to the bit
+    with it as without."""
+    q = 0
+    if contact is not None:
+        q = contact.shape[0]
+    return np.full((P.n + 1, 2, 3), np.nan), np.empty(q, np.int64), np.zeros(1, np.int64)
+
+
+@njit(cache=True)
+def _near_rows(contact, box, near):
+    """The rows of ``contact`` whose :func:`_boxes` ``box`` may overlap, from
+    the candidate list ``near`` (:func:`near_pairs`), rebuilt first if a box
+    corner moved more than NEAR_MARGIN / 2 since it was built. A pair left
+    out was NEAR_MARGIN apart along some axis then, and each of its boxes has
+    moved at most half of that since: it is apart now, as
+    :func:`_pair_apart` (``>=``) would find it."""
+    built, rows, count = near
+    half = 0.5 * NEAR_MARGIN
+    stale = False
+    for i in range(box.shape[0]):
+        for c in range(2):
+            for k in range(3):
+                if not abs(box[i, c, k] - built[i, c, k]) <= half:  # NaN: not built yet
+                    stale = True
+                    break
+            if stale:
+                break
+        if stale:
+            break
+    if stale:
+        built[:] = box
+        m = 0
+        for r in range(contact.shape[0]):
+            a, b = int(contact[r, 0]), int(contact[r, 1])
+            listed = True
+            for k in range(3):
+                if (box[a, 0, k] >= box[b, 1, k] + NEAR_MARGIN
+                        or box[b, 0, k] >= box[a, 1, k] + NEAR_MARGIN):
+                    listed = False
+                    break
+            if listed:
+                rows[m] = r
+                m += 1
+        count[0] = m
+    return rows[:count[0]]
+
+
+@njit(cache=True, inline='always')
+def _candidates(P, contact, R, p, near):
+    """The :func:`_boxes` at poses (R, p) and the rows of ``contact`` to test
+    with :func:`_pair_apart`: those of the candidate list ``near``, or every
+    row for None."""
+    box = _boxes(P, R, p)
+    if near is None:
+        return box, np.arange(contact.shape[0])
+    return box, _near_rows(contact, box, near)
+
+
 @njit(cache=True)
 def _pair_points(P, contact, r, R, p, work):
     """Contact points of pair r of ``P.contact`` (:func:`boxes.contact`): their
@@ -856,7 +929,7 @@ def _pair_points(P, contact, r, R, p, work):
 
 
 @njit(cache=True)
-def panel_contacts(P, contact, R, p, w, vo, f):
+def panel_contacts(P, contact, R, p, w, vo, f, near):
     """Subtract the panel-contact wrenches from f (n + 1, 6), the bias wrenches
     about the ground origin; returns the contact energy (J) and the power its
     dampers dissipate (W).
@@ -870,7 +943,8 @@ def panel_contacts(P, contact, R, p, w, vo, f):
     in over the first ``CONTACT_RAMP`` of depth (:func:`_contact_law`). The
     spring stores its energy; the rest of the push's work, (push - spring) s
     >= 0, is dissipated (s is d's rate up to the motion of the point).
-    ``contact`` is ``P.contact``, passed apart so numba prunes this for None.
+    ``contact`` is ``P.contact``, passed apart so numba prunes this for None;
+    ``near`` a candidate list (:func:`near_pairs`) or None for every pair.
     """
     if contact is None:
         return 0.0, 0.0
@@ -878,8 +952,8 @@ def panel_contacts(P, contact, R, p, w, vo, f):
     power = 0.0
     work = box_scratch()
     points, depths = work[-2], work[-1]
-    box = _boxes(P, R, p)
-    for r in range(contact.shape[0]):
+    box, rows = _candidates(P, contact, R, p, near)
+    for r in rows:
         if _pair_apart(contact, r, box):
             continue
         count, normal = _pair_points(P, contact, r, R, p, work)
@@ -899,7 +973,7 @@ def panel_contacts(P, contact, R, p, w, vo, f):
 
 
 @njit(cache=True)
-def contact_onsets(P, contact, y, t, pressed, record):
+def contact_onsets(P, contact, y, t, pressed, record, near=None):
     """The panel contact pairs that press at y (some point deeper than 0) but did
     not at the last call, per ``pressed`` (q,) bool, which is updated in place.
 
@@ -909,7 +983,8 @@ def contact_onsets(P, contact, y, t, pressed, record):
     Called once per accepted step: a contact stops an impact within a step or
     two, so the speed at the step that brought the pair into contact is the
     impact's; the samples would miss it (issue 33: the contact absorbed a
-    4.2 m/s impact between two samples).
+    4.2 m/s impact between two samples). ``near``: the run's candidate list
+    (:func:`near_pairs`), or None to test every pair.
     """
     if contact is None:
         return
@@ -917,9 +992,11 @@ def contact_onsets(P, contact, y, t, pressed, record):
     R, p, w, vo, _ = kinematics(P, y[:n], y[n:2 * n])
     work = box_scratch()
     points = work[-2]
-    box = _boxes(P, R, p)
-    for r in range(contact.shape[0]):
-        was = pressed[r]
+    box, rows = _candidates(P, contact, R, p, near)
+    before = pressed.copy()
+    pressed[:] = False  # a pair off the list is apart
+    for r in rows:
+        was = before[r]
         if _pair_apart(contact, r, box):
             pressed[r] = False
             continue
@@ -938,9 +1015,11 @@ def contact_onsets(P, contact, y, t, pressed, record):
 
 
 @njit(cache=True, inline='always')
-def _bias(P, theta, omega, kin, Jb, hb):
+def _bias(P, theta, omega, kin, Jb, hb, near):
     """Generalised force minus bias by recursive Newton-Euler with zero joint
-    acceleration, for the kinematics ``kin`` and :func:`body_inertias`' (J, h).
+    acceleration, for the kinematics ``kin`` and :func:`body_inertias`' (J, h),
+    and the panel contacts' candidate list ``near`` (:func:`near_pairs`; None:
+    every pair).
 
     Returns Q (n,) N m (``M qdd = Q`` for the tree), the velocity-product
     spatial accelerations (n + 1, 6), and the spring energy, dissipation and
@@ -981,7 +1060,7 @@ def _bias(P, theta, omega, kin, Jb, hb):
         _put(f, i, _add(_get(f, i), fw))
         _put(f, i, _add(_get(f, i, 3), fv), 3)
     dissipation += air_drag(P, P.air, R, p, w, vo, f)
-    e, pw = panel_contacts(P, P.contact, R, p, w, vo, f)
+    e, pw = panel_contacts(P, P.contact, R, p, w, vo, f, near)
     spring += e
     dissipation += pw
     Q = np.empty(n)
@@ -998,7 +1077,7 @@ def _bias(P, theta, omega, kin, Jb, hb):
 
 
 @njit(cache=True)
-def mass_and_bias(P, theta, omega):
+def mass_and_bias(P, theta, omega, near=None):
     """Mass matrix, generalised force and everything the energy needs.
 
     Returns
@@ -1013,13 +1092,15 @@ def mass_and_bias(P, theta, omega):
     R, p, _, _, S = kin
     Jb, hb = body_inertias(P, R, p)
     M = mass_matrix(P, S, Jb, hb)
-    Q, acc, spring, dissipation, gravity_energy = _bias(P, theta, omega, kin, Jb, hb)
+    Q, acc, spring, dissipation, gravity_energy = _bias(P, theta, omega, kin, Jb, hb, near)
     return M, Q, kin, acc, spring, dissipation, gravity_energy
 
 
 @njit(cache=True)
-def rhs(P, y):
+def rhs(P, y, near=None):
     """dy/dt of the state vector (see the module docstring); NaN if M is not positive definite.
+    ``near``: the run's candidate list of panel contact pairs (:func:`near_pairs`),
+    or None to test every pair.
 
     Solves ``M qdd = Q`` by the articulated-body algorithm (O(n)) where
     :func:`articulated.applies`, else by CRBA and Cholesky.
@@ -1034,7 +1115,7 @@ def rhs(P, y):
         kin = kinematics(P, theta, omega)
         R, p, _, _, S = kin
         Jb, hb = body_inertias(P, R, p)
-        Q, acc, _, dissipation, _ = _bias(P, theta, omega, kin, Jb, hb)
+        Q, acc, _, dissipation, _ = _bias(P, theta, omega, kin, Jb, hb, near)
         dy[2 * n] = dissipation
         U, D, ok = articulated.factor(P, S, articulated.inertias(P, Jb, hb), np.zeros(n))
         if not ok:
@@ -1050,7 +1131,7 @@ def rhs(P, y):
                 return dy
             dy[2 * n + 1] = _exact_closure(P, c, J, gamma, Y, LA, omega, qdd)
         return dy
-    M, qdd, kin, acc, _, dissipation, _ = mass_and_bias(P, theta, omega)
+    M, qdd, kin, acc, _, dissipation, _ = mass_and_bias(P, theta, omega, near)
     dy[2 * n] = dissipation
     L, ok = _cholesky(M)
     if not ok:
@@ -1136,18 +1217,19 @@ def _outer_add(out, scale, u):
 
 
 @njit(cache=True)
-def _pressed_points(P, contact, R, p):
+def _pressed_points(P, contact, R, p, near):
     """The panel contact points pressed (depth > 0) at poses (R, p): (count,
     rows), row i < count ``[pair, normal (3), point (3, m), depth (m)]``, so that
-    the separating axes run once a call, not once to count and again to fill."""
+    the separating axes run once a call, not once to count and again to fill.
+    ``near``: the run's candidate list (:func:`near_pairs`), or None."""
     rows = np.empty((64, 8))
     count = 0
     if contact is None:
         return count, rows
     work = box_scratch()
     points, depths = work[-2], work[-1]
-    box = _boxes(P, R, p)
-    for r in range(contact.shape[0]):
+    box, candidates = _candidates(P, contact, R, p, near)
+    for r in candidates:
         if _pair_apart(contact, r, box):
             continue
         found, normal = _pair_points(P, contact, r, R, p, work)
@@ -1187,7 +1269,7 @@ def _contact_rows(P, contact, pressed, S, U, kk, cc, start):
 
 
 @njit(cache=True, inline='always')
-def stiff_terms(P, y):
+def stiff_terms(P, y, near=None):
     """The stiff springs and dampers in joint space, ``K = diag(Kd) + U^T
     diag(kk) U`` and ``C = diag(Cd) + U^T diag(cc) U`` (N m/rad, N m s/rad),
     at the current configuration.
@@ -1212,7 +1294,7 @@ def stiff_terms(P, y):
         Cd[i] = P.c[i] + (P.c_s if contact else 0.0)
     m = P.cut_a.shape[0]
     closure = 6 * m if P.method == PENALTY else m
-    pressed = _pressed_points(P, P.contact, R, p)
+    pressed = _pressed_points(P, P.contact, R, p, near)
     rows = closure + pressed[0]
     U = np.zeros((rows, n))
     kk = np.empty(rows)
@@ -1240,7 +1322,7 @@ def stiff_terms(P, y):
 
 
 @njit(cache=True)
-def stiff_jacobian(P, y):
+def stiff_jacobian(P, y, near=None):
     """The stiff linear part of ``A = d qdd / d theta`` and ``B = d qdd / d omega``, (n, n).
 
     Keeps only the springs and dampers of :func:`stiff_terms`, at the current
@@ -1254,7 +1336,7 @@ def stiff_jacobian(P, y):
     Returns (A, B, ok); ok is False if M is not positive definite.
     """
     n = P.n
-    kin, Kd, Cd, U, kk, cc = stiff_terms(P, y)
+    kin, Kd, Cd, U, kk, cc = stiff_terms(P, y, near)
     R, p, w, vo, S = kin
     Jb, hb = body_inertias(P, R, p)
     M = mass_matrix(P, S, Jb, hb)

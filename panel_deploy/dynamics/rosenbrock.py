@@ -140,12 +140,12 @@ def _jac_times(n, A, B, u, out):
 
 
 @njit(cache=True)
-def terms(P, y):
+def terms(P, y, near=None):
     """The stiff Jacobian at y for :func:`step_terms`: (S, I6, Jb, hb, Kd, Cd,
     U, kk, cc), the terms of :func:`kernels.stiff_terms` with the joint screws S,
     the spatial inertias I6 of the mass matrix (:mod:`.articulated`) and the
     body inertias (Jb, hb) they are made of (:func:`kernels.body_inertias`)."""
-    kin, Kd, Cd, U, kk, cc = kernels.stiff_terms(P, y)
+    kin, Kd, Cd, U, kk, cc = kernels.stiff_terms(P, y, near)
     R, p, _, _, S = kin
     Jb, hb = kernels.body_inertias(P, R, p)
     return S, articulated.inertias(P, Jb, hb), Jb, hb, Kd, Cd, U, kk, cc
@@ -299,12 +299,14 @@ def _solution(y, K):
 
 
 @njit(cache=True)
-def step(P, y, f, h, A, B, K):
+def step(P, y, f, h, A, B, K, near=None):
     """One ROS34PW2 step of length h from y (f = rhs(P, y)) with Jacobian blocks A, B.
 
     Stages go to K (4, N). Returns (y1, err, ok): the order-3 solution, the
     difference to the embedded order-2 one, and False if ``W`` is singular
     (the caller shortens the step).
+    ``near``: the run's candidate list of panel contact pairs
+    (:func:`kernels.near_pairs`).
     """
     n = P.n
     N = y.shape[0]
@@ -329,7 +331,7 @@ def step(P, y, f, h, A, B, K):
             fi = f
         else:
             _stage_state(y, K, st, yi)
-            fi = kernels.rhs(P, yi)
+            fi = kernels.rhs(P, yi, near)
         for i in range(N):
             r[i] = h * fi[i]
         if st > 0:
@@ -343,7 +345,7 @@ def step(P, y, f, h, A, B, K):
 
 
 @njit(cache=True)
-def step_terms(P, y, f, h, jac, K):
+def step_terms(P, y, f, h, jac, K, near=None):
     """:func:`step` with the stiff Jacobian as the terms of :func:`terms`, in O(n r).
 
     Solves the reduced system times M, ``(M + hg C + hg^2 K) v = h M f_v - h
@@ -371,7 +373,7 @@ def step_terms(P, y, f, h, jac, K):
         fi = f
         if st > 0:  # u stays zero at stage 0
             _stage_state(y, K, st, yi)
-            fi = kernels.rhs(P, yi)
+            fi = kernels.rhs(P, yi, near)
             _stage_argument(K, st, u)
         z = K[st]
         articulated.times(P, S, I6, fi[n:2 * n], g, work6)

@@ -316,6 +316,33 @@ class FoldSection:
 
 
 @dataclass(frozen=True)
+class ScreeningSection:
+    """How ``fold.circuit: auto`` and ``panel-deploy fold --rank`` screen the
+    packing circuits (:mod:`panel_deploy.fold.ranking`)."""
+
+    # 8: measured with the paper's panels and springs (2 shared cores), 4 x 4 (all
+    # 6) 2.2 s, 5 x 6 4.8 s, 6 x 6 8.9 s, 10 x 10 49 s (its first 8 packing circuits
+    # are among its first 132; 4-7 s each, mostly building the 100-body model and
+    # the collision check, the runs colliding by 0.05 s).
+    candidates: int = spec(8, integer(1, 100000), "",
+                           "packing circuits screened, the first in circuit index order")
+    # 1 s: past the first collisions of the 4 x 4 to 6 x 6 circuits screened
+    # (0.02-0.75 s with the paper's panels and springs), short against a full
+    # deployment (the paper's array lies flat at ~1.6 s); a circuit still
+    # unfolding then ranks by how close to flat it came.
+    t_end: float = spec(1.0, number(0.0, 600.0, low_open=True), "s",
+                        "screening end time (at most simulation.t_end)")
+    # 1e-4: what the paper scene's stiffness search evaluates at; 1e-3 failed the
+    # energy balance (1 %) on 3 of 16 of the 3 x 4 .. 4 x 5 circuits, 1e-4 on 1.
+    rtol: float = spec(1.0e-4, number(0.0, 1.0, low_open=True), "",
+                       "screening relative tolerance (at least simulation.rtol; atol keeps "
+                       "the scene's ratio to rtol)")
+    damping_ratio: Any = spec(None, optional(number(0.0, 1e3, why=_WHY_STIFF)), "s",
+                              "c/k of every hinge in the screening runs (default "
+                              "hinges.damping_ratio), e.g. the top of the search's c/k bounds")
+
+
+@dataclass(frozen=True)
 class HingeSection:
     stiffness: float = spec(0.1, number(0.0, 1e4, why=_WHY_STIFF), "N m/rad",
                             "k of every hinge unless overridden")
@@ -467,6 +494,7 @@ class Scene:
 
     array: ArraySection
     fold: FoldSection = FoldSection()
+    screening: ScreeningSection = ScreeningSection()
     hinges: HingeSection = HingeSection()
     contact: ContactSection = ContactSection()
     closure: ClosureSection = ClosureSection()
@@ -485,7 +513,8 @@ class Scene:
 
 
 SECTIONS = {
-    "array": ArraySection, "fold": FoldSection, "hinges": HingeSection,
+    "array": ArraySection, "fold": FoldSection, "screening": ScreeningSection,
+    "hinges": HingeSection,
     "contact": ContactSection, "closure": ClosureSection,
     "simulation": SimulationSection, "collision": CollisionSection, "air": AirSection,
     "optimisation": OptimisationSection,

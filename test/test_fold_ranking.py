@@ -89,6 +89,23 @@ def test_screening_settings_are_the_scenes_own_shortened_and_loosened(soft):
     assert (s.t_end, s.rtol, s.samples) == (0.5, 1e-3, 401)
 
 
+def test_the_scenes_screening_section_sets_the_screening(soft):
+    """screening.t_end, rtol and damping_ratio are the ranking's defaults; the
+    damping ratio goes into every hinge of the screened scene, and the record."""
+    scene = load_scene(PAPER, SOFT + ["screening.t_end=1.5", "screening.rtol=1e-5",
+                                      "screening.damping_ratio=0.3", "screening.candidates=2"])
+    s = ScreeningSettings.of(scene)
+    assert (s.t_end, s.rtol, s.damping_ratio) == (1.5, 1e-5, 0.3)
+    assert s.scene(scene).hinges.damping_ratio == 0.3
+    assert ScreeningSettings.of(soft).scene(soft).hinges == soft.hinges  # default: as it is
+    r = rank_circuits(scene)
+    assert r.candidates == 2 and r.to_dict()["settings"]["damping_ratio"] == 0.3
+    damped = {e.index: e for e in r.table}
+    as_is = {e.index: e for e in rank_circuits(soft, 2, t_end=1.5, rtol=1e-5).table}
+    # the damping changed the runs, so the setting reached them
+    assert any(damped[i].text() != as_is[i].text() for i in damped)
+
+
 def test_candidates_bound_the_work_and_say_which_were_screened(soft):
     r = rank_circuits(soft.replace(array=replace(soft.array, rows=5, cols=6)), 2,
                       t_end=0.01)
@@ -205,7 +222,9 @@ def test_cli_fold_rank_screens_to_the_end_time_asked(capsys):
     (["fold", "--scene", PAPER, "--rank", "--candidates", "0"], "--candidates: expected"),
     (["fold", "--scene", PAPER, "--screen-t-end", "6"], "--screen-t-end: only with --rank"),
     (["fold", "--scene", PAPER, "--rank", "--screen-t-end", "0"], "--screen-t-end: expected a number > 0"),
-    (["fold", "--scene", PAPER, "--rank", "--screen-t-end", "nan"], "--screen-t-end: expected a finite"),
+    (["fold", "--scene", PAPER, "--rank", "--screen-t-end", "nan"], "--screen-t-end: expected a number"),
+    (["fold", "--scene", PAPER, "--rank", "--set", "screening.damping_ratio=-1"],
+     "screening.damping_ratio: expected a number >= 0"),
 ])
 def test_cli_fold_rank_flags_are_checked(capsys, argv, expected):
     code, out, err = run(capsys, *argv)

@@ -12,13 +12,23 @@ import pytest
 from panel_deploy.build import build_model
 from panel_deploy.fold import design, kutzbach_dof
 from panel_deploy.fold.kutzbach import body_joints
+from panel_deploy.fold.ranking import resolve_circuit
 from panel_deploy.optimise import evaluate
 from panel_deploy.scene import load_scene, resolve_scene
 
 
 @pytest.fixture(scope="module")
 def scene():
-    return load_scene(resolve_scene("array_5x6"))
+    return resolve_circuit(load_scene(resolve_scene("array_5x6")))
+
+
+def test_the_screening_ranks_circuit_134_first(scene):
+    """fold.circuit: auto with the scene's screening (all 90 packing circuits, 6 s,
+    c/k 1 s) chooses 134: it lies flat first, without a collision."""
+    choice = scene.fold.circuit_choice
+    assert scene.fold.circuit == choice["index"] == 134, choice
+    assert choice["outcome"].startswith("flat at") and len(choice["screened"]) == 90
+    assert choice["screening"]["damping_ratio"] == 1.0 and choice["screening"]["t_end"] == 6.0
 
 
 def test_the_scene_folds_along_circuit_134_merged_to_dof_18(scene):

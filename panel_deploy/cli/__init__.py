@@ -82,11 +82,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--rank", action="store_true",
                    help="with --scene: rank the first packing circuits by a screening run of "
                         "each (what fold.circuit: auto chooses from)")
-    s.add_argument("--candidates", type=int, metavar="N",
-                   help="with --rank: screen at most N packing circuits (default 8)")
-    s.add_argument("--screen-t-end", type=float, metavar="T",
-                   help="with --rank: screening end time, s (default 1; at most the scene's "
-                        "simulation.t_end): long enough to see slow deployments lie flat")
+    alias(s, "--candidates", "screening.candidates", metavar="N",
+          help="with --rank: screen at most N packing circuits (default: the scene's "
+               "screening.candidates)")
+    alias(s, "--screen-t-end", "screening.t_end", metavar="T",
+          help="with --rank: screening end time, s (default: the scene's screening.t_end; "
+               "at most simulation.t_end): long enough to see slow deployments lie flat")
     add_set(s)
     s.set_defaults(func=_command("fold", "fold_command"))
 

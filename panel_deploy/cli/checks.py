@@ -128,8 +128,6 @@ def _fold(args):
                                        "hinges and settings (--set array.rows=... resizes it)")
         if args.plot:
             raise SceneError("--plot", "not with --rank (plot one circuit: --set fold.circuit=N)")
-        _positive_int(args, "candidates", "--candidates", low=1)
-        finite_number(getattr(args, "screen_t_end", None), "--screen-t-end", low=0, low_open=True)
     else:
         for attr, flag in (("candidates", "--candidates"), ("screen_t_end", "--screen-t-end")):
             if getattr(args, attr, None) is not None:

@@ -64,13 +64,11 @@ def _list(rows, cols, limit, args) -> int:
 
 
 def _rank(scene, args) -> int:
-    from ..fold.ranking import DEFAULT_CANDIDATES, SCREEN_T_END, rank_circuits
+    from ..fold.ranking import rank_circuits
 
     arr = scene.array
-    candidates = DEFAULT_CANDIDATES if args.candidates is None else args.candidates
-    t_end = SCREEN_T_END if args.screen_t_end is None else args.screen_t_end
     with Progress(None, f"rank {arr.rows} x {arr.cols}", "circuits") as bar:
-        ranking = rank_circuits(scene, candidates, t_end=t_end, progress=lambda _: bar.update())
+        ranking = rank_circuits(scene, progress=lambda _: bar.update())
     print(json.dumps(ranking.to_dict(), indent=1) if args.json else ranking.text())
     return 0 if ranking.best is not None else 1
 

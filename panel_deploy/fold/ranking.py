@@ -31,26 +31,9 @@ from ..errors import PanelDeployError, SceneError
 from . import designs
 from .report import short_reason
 
-#: Packing circuits screened unless told otherwise. Measured with the paper's
-#: panels and springs (2 shared cores, other jobs running): 4 x 4 (all 6)
-#: 2.2 s, 5 x 6 4.8 s, 6 x 6 8.9 s, 10 x 10 49 s (its first 8 packing
-#: circuits are among its first 132; 4-7 s each, mostly building the 100-body
-#: model and collision check, the runs colliding by 0.05 s).
-DEFAULT_CANDIDATES = 8
 #: Circuits examined for packing at most while looking for the candidates
 #: (a design costs 1-40 ms, 4 x 4 .. 10 x 10).
 MAX_EXAMINED = 1000
-#: Screening end time, s: past the first collisions of the 4 x 4 to 6 x 6
-#: circuits we screened (0.02-0.75 s with the paper's panels and springs, soft
-#: or not), short against a full deployment (the paper's array lies flat at
-#: ~1.6 s). A circuit still unfolding then ranks by how close to flat it came.
-SCREEN_T_END = 1.0
-#: Screening relative tolerance (atol keeps its ratio to rtol): what the
-#: paper scene's stiffness search evaluates at. 1e-3 failed the energy
-#: balance (1 %) on 3 of 16 of the 3 x 4 .. 4 x 5 circuits where 1e-4 failed
-#: on 1.
-SCREEN_RTOL = 1.0e-4
-
 #: Outcome classes, best first (the first item of :attr:`Screening.score`).
 FLAT, NO_COLLISION, COLLISION, FAILED, NOT_SCREENED = range(5)
 OUTCOMES = ("flat", "no collision", "collision", "failed", "not screened")
@@ -70,6 +53,8 @@ class ScreeningSettings:
         Sample instants, the scene's sample interval kept over ``t_end``.
     refine : bool
         Collisions looked for between samples too (else at the samples only).
+    damping_ratio : float or None
+        c/k of every hinge, s; None: the scene's hinges as they are.
     """
 
     t_end: float
@@ -77,11 +62,16 @@ class ScreeningSettings:
     atol: float
     samples: int
     refine: bool
+    damping_ratio: float | None = None
 
     @classmethod
-    def of(cls, scene, t_end: float = SCREEN_T_END, rtol: float = SCREEN_RTOL,
+    def of(cls, scene, t_end: float | None = None, rtol: float | None = None,
            refine: bool = False) -> "ScreeningSettings":
-        """The screening settings of ``scene`` for the requested ``t_end`` (s) and ``rtol``."""
+        """The screening settings of ``scene`` (its ``screening`` section) for
+        the requested ``t_end`` (s) and ``rtol``, if given."""
+        own = scene.screening
+        t_end = own.t_end if t_end is None else t_end
+        rtol = own.rtol if rtol is None else rtol
         if not (isinstance(t_end, (int, float)) and t_end > 0 and math.isfinite(t_end)):
             raise SceneError("t_end", f"expected a screening end time > 0 s, got {t_end!r}")
         if not (isinstance(rtol, (int, float)) and rtol > 0 and math.isfinite(rtol)):
@@ -91,18 +81,24 @@ class ScreeningSettings:
         r = max(float(rtol), sim.rtol)
         return cls(t_end=t, rtol=r, atol=sim.atol * r / sim.rtol,
                    samples=max(3, round((sim.samples - 1) * t / sim.t_end) + 1),
-                   refine=bool(refine) and scene.collision.refine)
+                   refine=bool(refine) and scene.collision.refine,
+                   damping_ratio=own.damping_ratio)
 
     def scene(self, scene):
         """``scene`` simulated and checked as the screening does."""
+        hinges = scene.hinges
+        if self.damping_ratio is not None:
+            hinges = replace(hinges, damping_ratio=self.damping_ratio)
         return scene.replace(
+            hinges=hinges,
             simulation=replace(scene.simulation, t_end=self.t_end, rtol=self.rtol,
                                atol=self.atol, samples=self.samples),
             collision=replace(scene.collision, refine=self.refine))
 
     def to_dict(self) -> dict:
         return {"t_end": self.t_end, "rtol": self.rtol, "atol": self.atol,
-                "samples": self.samples, "refine": self.refine}
+                "samples": self.samples, "refine": self.refine,
+                "damping_ratio": self.damping_ratio}
 
 
 @dataclass(frozen=True)
@@ -238,6 +234,7 @@ class Ranking:
         lines = [f"{self.rows} x {self.cols} array: {len(self.screened)} packing circuit(s) "
                  f"screened of {self.examined} examined (at most {self.candidates}), "
                  f"t_end {s.t_end:g} s, rtol {s.rtol:g}, atol {s.atol:g}, {s.samples} samples, "
+                 f"{'' if s.damping_ratio is None else f'c/k {s.damping_ratio:g} s, '}"
                  f"collisions {'between samples too' if s.refine else 'at the samples'}; "
                  f"{self.wall_time:.3g} s",
                  " rank  circuit  wall (s)  outcome"]
@@ -290,8 +287,8 @@ def screen_circuit(scene, index: int, settings: ScreeningSettings) -> Screening:
                      clearance=o.d, wall_time=wall)
 
 
-def rank_circuits(scene, candidates: int = DEFAULT_CANDIDATES, *, t_end: float = SCREEN_T_END,
-                  rtol: float = SCREEN_RTOL, refine: bool = False,
+def rank_circuits(scene, candidates: int | None = None, *, t_end: float | None = None,
+                  rtol: float | None = None, refine: bool = False,
                   max_examined: int = MAX_EXAMINED,
                   progress: Callable[[Screening], None] | None = None) -> Ranking:
     """Rank the first ``candidates`` packing circuits of ``scene``'s array by screening runs.
@@ -299,13 +296,14 @@ def rank_circuits(scene, candidates: int = DEFAULT_CANDIDATES, *, t_end: float =
     Parameters
     ----------
     scene : Scene
-        Its array, fold ground and merges, and physics; ``fold.circuit`` is
-        ignored.
-    candidates : int
+        Its array, fold ground and merges, physics and ``screening`` section
+        (the defaults of the next three, and the screening's c/k);
+        ``fold.circuit`` is ignored.
+    candidates : int, optional
         Most packing circuits screened: the first ones in index order.
-    t_end : float
+    t_end : float, optional
         Screening end time, s (the scene's ``simulation.t_end`` if shorter).
-    rtol : float
+    rtol : float, optional
         Screening relative tolerance (the scene's ``simulation.rtol`` if
         looser); atol keeps the scene's ratio to rtol.
     refine : bool
@@ -331,6 +329,7 @@ def rank_circuits(scene, candidates: int = DEFAULT_CANDIDATES, *, t_end: float =
     SceneError
         For ``candidates`` or ``max_examined`` below 1, or a bad ``t_end`` or ``rtol``.
     """
+    candidates = scene.screening.candidates if candidates is None else candidates
     for name, value in (("candidates", candidates), ("max_examined", max_examined)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise SceneError(name, f"expected an integer >= 1, got {value!r}")
@@ -364,7 +363,7 @@ _CHOSEN_MAX = 32
 
 def _content(scene) -> str:
     """What a ranking depends on: every section but the informational ones."""
-    return repr((scene.array, replace(scene.fold, circuit_choice=None), scene.hinges,
+    return repr((scene.array, replace(scene.fold, circuit_choice=None), scene.screening, scene.hinges,
                  scene.contact, scene.closure, scene.gravity, scene.simulation,
                  scene.collision, scene.air))
 

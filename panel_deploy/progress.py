@@ -65,8 +65,14 @@ class Progress:
         self._printed = self.done
         of = f"/{self.total}" if self.total is not None else ""
         extra = f", {self._postfix}" if self._postfix else ""
-        print(f"{self.desc}: {self.done}{of} {self.units}{extra}, "
-              f"{self._shown - self._start:.1f} s", file=self.file, flush=True)
+        elapsed = self._shown - self._start
+        # what a log reader wants of a long job (an 8 x 8 search: an hour): when it
+        # ends if it keeps this pace; a budget that the work may stop short of
+        # makes this an upper bound
+        left = (f", {elapsed * (self.total - self.done) / self.done:.0f} s left at this pace"
+                if self.total is not None and 0 < self.done < self.total else "")
+        print(f"{self.desc}: {self.done}{of} {self.units}{extra}, {elapsed:.1f} s{left}",
+              file=self.file, flush=True)
 
     def close(self) -> None:
         if self._bar is not None:

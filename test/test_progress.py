@@ -23,6 +23,19 @@ def test_plain_lines_without_a_terminal(monkeypatch):
     assert lines[-1].startswith("tolerance check: 3/3") and "\r" not in out.getvalue()
 
 
+def test_a_plain_line_says_how_long_is_left_at_this_pace(monkeypatch):
+    clock = iter([100.0, 110.0, 110.0, 130.0, 130.0])  # start, then per update: test, line
+    monkeypatch.setattr(progress.time, "monotonic", lambda: next(clock))
+    monkeypatch.setattr(progress, "LINE_EVERY", 0.0)
+    out = io.StringIO()
+    bar = Progress(40, "optimise", "evaluations", file=out)
+    bar.update(10)   # 10 of 40 in 10 s: 30 s left
+    bar.update(30)   # done: nothing left to say
+    first, last = out.getvalue().splitlines()
+    assert first == "optimise: 10/40 evaluations, 10.0 s, 30 s left at this pace"
+    assert last == "optimise: 40/40 evaluations, 30.0 s"
+
+
 def test_bar_in_a_terminal():
     out = Terminal()
     with Progress(4, "optimise", "evaluations", file=out) as bar:

@@ -15,6 +15,16 @@ from tqdm import tqdm
 LINE_EVERY = 5.0
 
 
+def time_left(elapsed: float, done: int, total: int | None) -> str:
+    """", N s left at this pace" for ``done`` of ``total`` steps in ``elapsed``
+    s, or "" once done or without a total: what a log reader of a long job (an
+    8 x 8 search: most of an hour) wants to know; an upper bound where the work
+    may stop short of its total, as a search short of its budget."""
+    if total is None or not 0 < done < total:
+        return ""
+    return f", {elapsed * (total - done) / done:.0f} s left at this pace"
+
+
 class Progress:
     """Count ``total`` steps of ``desc``; use as a context manager.
 
@@ -66,13 +76,8 @@ class Progress:
         of = f"/{self.total}" if self.total is not None else ""
         extra = f", {self._postfix}" if self._postfix else ""
         elapsed = self._shown - self._start
-        # what a log reader wants of a long job (an 8 x 8 search: an hour): when it
-        # ends if it keeps this pace; a budget that the work may stop short of
-        # makes this an upper bound
-        left = (f", {elapsed * (self.total - self.done) / self.done:.0f} s left at this pace"
-                if self.total is not None and 0 < self.done < self.total else "")
-        print(f"{self.desc}: {self.done}{of} {self.units}{extra}, {elapsed:.1f} s{left}",
-              file=self.file, flush=True)
+        print(f"{self.desc}: {self.done}{of} {self.units}{extra}, {elapsed:.1f} s"
+              f"{time_left(elapsed, self.done, self.total)}", file=self.file, flush=True)
 
     def close(self) -> None:
         if self._bar is not None:

@@ -3,6 +3,8 @@
 import io
 
 from panel_deploy import progress
+from panel_deploy.optimise import Progress as SearchProgress
+from panel_deploy.optimise import print_progress
 from panel_deploy.progress import Progress
 
 
@@ -34,6 +36,15 @@ def test_a_plain_line_says_how_long_is_left_at_this_pace(monkeypatch):
     first, last = out.getvalue().splitlines()
     assert first == "optimise: 10/40 evaluations, 10.0 s, 30 s left at this pace"
     assert last == "optimise: 40/40 evaluations, 30.0 s"
+
+
+def test_an_optimiser_progress_line_says_how_long_its_budget_leaves():
+    out = io.StringIO()
+    p = SearchProgress("global", 1, 100, 1.5, True, False, 50.0)
+    print_progress(p, out, budget=400)
+    print_progress(p, out)
+    with_budget, without = out.getvalue().splitlines()
+    assert with_budget.endswith("50.0 s, 150 s left at this pace") and without.endswith("50.0 s")
 
 
 def test_bar_in_a_terminal():

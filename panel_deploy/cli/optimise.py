@@ -67,7 +67,7 @@ def optimise_scene(args, scene) -> int:
                 bar.update(p.nfev - bar.done, phase=p.phase, best_f=f"{p.best_f:+.5f}",
                            feasible="yes" if not p.collision and p.reached_flat else "no")
             else:
-                print_progress(p, sys.stderr)
+                print_progress(p, sys.stderr, budget)
         result = optimise(model, scene, dask_address=arg("dask"),
                           progress=None if quiet else report,
                           k0=load_stiffness(arg("start"), model) if arg("start") else None)

@@ -31,6 +31,7 @@ import numpy as np
 from scipy.optimize import differential_evolution, minimize
 
 from ..errors import OptimisationError
+from ..progress import time_left
 from .damping import CENTRE_EVALUATIONS, centre_damping, damping_line
 from .evaluate import Evaluation, run_deployment
 from .parallel import BudgetExhausted, Cancelled, Evaluator, Job, make_backend
@@ -49,11 +50,12 @@ class Progress(NamedTuple):
     elapsed: float      #: s since the start
 
 
-def print_progress(p: Progress, file=None) -> None:
-    """One line per progress report (the CLI's default)."""
+def print_progress(p: Progress, file=None, budget: int | None = None) -> None:
+    """One line per progress report (the CLI's default); with the evaluation
+    ``budget``, how long it leaves at this pace."""
     print(f"{p.phase:>9}  it {p.iteration:3d}  nfev {p.nfev:4d}  best f {p.best_f:+.5f}  "
           f"collision {'yes' if p.collision else 'no '}  flat {'yes' if p.reached_flat else 'no '}  "
-          f"{p.elapsed:7.1f} s", file=file, flush=True)
+          f"{p.elapsed:7.1f} s{time_left(p.elapsed, p.nfev, budget)}", file=file, flush=True)
 
 
 @dataclass

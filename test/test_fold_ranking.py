@@ -19,6 +19,7 @@ from panel_deploy.errors import SceneError
 from panel_deploy.fold import circuit_by_index, ranking
 from panel_deploy.fold.ranking import (COLLISION, FLAT, NO_COLLISION, NOT_SCREENED,
                                        ScreeningSettings, rank_circuits, resolve_circuit)
+from panel_deploy.optimise.parallel import task_map
 from panel_deploy.scene import load_scene
 from panel_deploy.trajectory_io import load_trajectory
 
@@ -104,6 +105,27 @@ def test_the_scenes_screening_section_sets_the_screening(soft):
     as_is = {e.index: e for e in rank_circuits(soft, 2, t_end=1.5, rtol=1e-5).table}
     # the damping changed the runs, so the setting reached them
     assert any(damped[i].text() != as_is[i].text() for i in damped)
+
+
+def same_ranking(a, b):
+    """The two rankings agree in everything but their wall times."""
+    def drop_wall(r):
+        d = r.to_dict()
+        d.pop("wall_time")
+        for e in d["ranking"]:
+            e.pop("wall_time")
+        return d
+    assert drop_wall(a) == drop_wall(b)
+
+
+def test_screenings_on_worker_processes_rank_as_here(soft, ranked):
+    """task_map(2): the screenings on two local processes, each in its own
+    interpreter, give the same ranking as one after the other here."""
+    seen = []
+    with task_map(2) as screen:
+        parallel = rank_circuits(soft, progress=seen.append, task_map=screen)
+    same_ranking(parallel, ranked)
+    assert sorted(e.index for e in seen) == sorted(e.index for e in ranked.table)
 
 
 def test_candidates_bound_the_work_and_say_which_were_screened(soft):
@@ -225,6 +247,11 @@ def test_cli_fold_rank_screens_to_the_end_time_asked(capsys):
     (["fold", "--scene", PAPER, "--rank", "--screen-t-end", "nan"], "--screen-t-end: expected a number"),
     (["fold", "--scene", PAPER, "--rank", "--set", "screening.damping_ratio=-1"],
      "screening.damping_ratio: expected a number >= 0"),
+    (["fold", "--scene", PAPER, "--workers", "2"], "--workers: only with --rank"),
+    (["fold", "--scene", PAPER, "--rank", "--workers", "-1"], "--workers: expected an integer >= 0"),
+    (["fold", "--scene", PAPER, "--rank", "--dask", " "], "--dask: expected a scheduler address"),
+    (["fold", "--scene", PAPER, "--rank", "--dask", "tcp://127.0.0.1:9"],
+     "dask_address: cannot reach a Dask scheduler"),
 ])
 def test_cli_fold_rank_flags_are_checked(capsys, argv, expected):
     code, out, err = run(capsys, *argv)

@@ -88,6 +88,10 @@ def build_parser() -> argparse.ArgumentParser:
     alias(s, "--screen-t-end", "screening.t_end", metavar="T",
           help="with --rank: screening end time, s (default: the scene's screening.t_end; "
                "at most simulation.t_end): long enough to see slow deployments lie flat")
+    alias(s, "--workers", "optimisation.workers", metavar="N",
+          help="with --rank: screen on N local processes (default: the scene's "
+               "optimisation.workers; 0: all cores)")
+    s.add_argument("--dask", metavar="ADDRESS", help="with --rank: screen on this Dask scheduler")
     add_set(s)
     s.set_defaults(func=_command("fold", "fold_command"))
 

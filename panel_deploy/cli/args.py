@@ -51,11 +51,13 @@ def alias(parser, flag: str, key: str, **kwargs) -> None:
     parser.add_argument(flag, action=SceneKey, key=key, **kwargs)
 
 
-def scene_of(args, name_attr: str = "scene", resolve: bool = True):
+def scene_of(args, name_attr: str = "scene", resolve: bool = True, parallel: bool = False):
     """The scene ``args`` name (a file, a shipped scene's name, or an MCAP
     recording: the scene its deployment ran, overrides included), with the
     ``--set`` items and their aliases applied, and with ``resolve`` its
-    ``fold.circuit: auto`` resolved (:func:`chosen_circuit`).
+    ``fold.circuit: auto`` resolved (:func:`chosen_circuit`; with ``parallel``
+    the screenings run where the command's evaluations do:
+    ``optimisation.workers`` or ``--dask``).
 
     Raises
     ------
@@ -82,23 +84,30 @@ def scene_of(args, name_attr: str = "scene", resolve: bool = True):
         if flag is None:
             raise
         raise SceneError(flag, e.reason) from None
-    return chosen_circuit(scene) if resolve else scene
+    if not resolve:
+        return scene
+    if parallel:
+        return chosen_circuit(scene, scene.optimisation.workers, getattr(args, "dask", None))
+    return chosen_circuit(scene)
 
 
-def chosen_circuit(scene):
+def chosen_circuit(scene, workers: int = 1, dask_address: str | None = None):
     """``scene`` with ``fold.circuit: auto`` resolved to the best-ranked circuit
     (:func:`panel_deploy.fold.ranking.resolve_circuit`: a screening run of
-    the first packing circuits, with a progress line), which a note on stderr
-    names; any other scene as it is."""
+    the first packing circuits, with a progress line, on ``workers`` local
+    processes or the Dask scheduler at ``dask_address``), which a note on
+    stderr names; any other scene as it is."""
     if scene.fold.circuit != "auto":
         return scene
     import sys
 
     from ..fold.ranking import resolve_circuit
+    from ..optimise.parallel import task_map
     from ..progress import Progress
 
-    with Progress(None, "fold.circuit: auto", "circuits") as bar:
-        scene = resolve_circuit(scene, progress=lambda _: bar.update())
+    with (task_map(workers, dask_address) as screen,
+          Progress(None, "fold.circuit: auto", "circuits") as bar):
+        scene = resolve_circuit(scene, progress=lambda _: bar.update(), task_map=screen)
     c = scene.fold.circuit_choice
     print(f"panel-deploy: note: fold.circuit: auto chose circuit {c['index']}, the best-ranked of "
           f"{len(c['screened'])} screened ({c['outcome']}; panel-deploy fold --rank shows the "

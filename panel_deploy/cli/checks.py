@@ -128,8 +128,10 @@ def _fold(args):
                                        "hinges and settings (--set array.rows=... resizes it)")
         if args.plot:
             raise SceneError("--plot", "not with --rank (plot one circuit: --set fold.circuit=N)")
+        _dask_address(args)
     else:
-        for attr, flag in (("candidates", "--candidates"), ("screen_t_end", "--screen-t-end")):
+        for attr, flag in (("candidates", "--candidates"), ("screen_t_end", "--screen-t-end"),
+                           ("workers", "--workers"), ("dask", "--dask")):
             if getattr(args, attr, None) is not None:
                 raise SceneError(flag, "only with --rank (the circuits it screens)")
     if args.scene is not None:
@@ -166,6 +168,10 @@ def _optimise(args):
         if not tol < 1:
             raise SceneError("--perturb-tol", f"expected a fraction in [0, 1) (k and c stay "
                                               f"positive), got {tol:g}")
+    _dask_address(args)
+
+
+def _dask_address(args):
     if getattr(args, "dask", None) is not None and not str(args.dask).strip():
         raise SceneError("--dask", "expected a scheduler address, got an empty string")
 

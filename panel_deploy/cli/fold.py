@@ -65,10 +65,12 @@ def _list(rows, cols, limit, args) -> int:
 
 def _rank(scene, args) -> int:
     from ..fold.ranking import rank_circuits
+    from ..optimise.parallel import task_map
 
     arr = scene.array
-    with Progress(None, f"rank {arr.rows} x {arr.cols}", "circuits") as bar:
-        ranking = rank_circuits(scene, progress=lambda _: bar.update())
+    with (task_map(scene.optimisation.workers, args.dask) as screen,
+          Progress(None, f"rank {arr.rows} x {arr.cols}", "circuits") as bar):
+        ranking = rank_circuits(scene, progress=lambda _: bar.update(), task_map=screen)
     print(json.dumps(ranking.to_dict(), indent=1) if args.json else ranking.text())
     return 0 if ranking.best is not None else 1
 

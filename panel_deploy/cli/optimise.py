@@ -38,7 +38,7 @@ def optimise_command(args) -> int:
     """
     if args.record and not args.out:
         raise SceneError("--record", "needs --out RESULT.yaml: the recording deploys the K written there")
-    scene = scene_of(args)
+    scene = scene_of(args, parallel=True)
     if args.record:
         from ..record.deployment import check_recordable, record_optimum
         check_recordable(scene)

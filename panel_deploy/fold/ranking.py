@@ -26,6 +26,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import partial
 
 from ..errors import PanelDeployError, SceneError
 from . import designs
@@ -290,7 +291,8 @@ def screen_circuit(scene, index: int, settings: ScreeningSettings) -> Screening:
 def rank_circuits(scene, candidates: int | None = None, *, t_end: float | None = None,
                   rtol: float | None = None, refine: bool = False,
                   max_examined: int = MAX_EXAMINED,
-                  progress: Callable[[Screening], None] | None = None) -> Ranking:
+                  progress: Callable[[Screening], None] | None = None,
+                  task_map: Callable | None = None) -> Ranking:
     """Rank the first ``candidates`` packing circuits of ``scene``'s array by screening runs.
 
     Parameters
@@ -313,7 +315,14 @@ def rank_circuits(scene, candidates: int | None = None, *, t_end: float | None =
     max_examined : int
         Most circuits examined for packing while looking for the candidates.
     progress : callable, optional
-        Called with each examined circuit's :class:`Screening` as it is done.
+        Called with each examined circuit's :class:`Screening` as it is done
+        (those that do not pack first).
+    task_map : callable, optional
+        ``task_map(fn, items)``, an iterable of ``fn(item)`` in order, to run
+        the screenings on (:func:`panel_deploy.optimise.parallel.task_map`:
+        local processes or a Dask cluster); default: one after the other in
+        this process. The screenings are independent, so the ranking is the
+        same either way.
 
     Returns
     -------
@@ -335,17 +344,20 @@ def rank_circuits(scene, candidates: int | None = None, *, t_end: float | None =
             raise SceneError(name, f"expected an integer >= 1, got {value!r}")
     settings = ScreeningSettings.of(scene, t_end, rtol, refine)
     start = time.perf_counter()
-    table, examined, found = [], 0, 0
+    table, examined, packing = [], 0, []
     for index, design in designs(scene.array.rows, scene.array.cols):
-        if found == candidates or examined == max_examined:
+        if len(packing) == candidates or examined == max_examined:
             break
         examined += 1
         if design.stowed is None:
-            entry = Screening(index, False, NOT_SCREENED,
-                              f"does not pack: {short_reason(design.reason)}")
+            table.append(Screening(index, False, NOT_SCREENED,
+                                   f"does not pack: {short_reason(design.reason)}"))
+            if progress is not None:
+                progress(table[-1])
         else:
-            found += 1
-            entry = screen_circuit(scene, index, settings)
+            packing.append(index)
+    screen = partial(screen_circuit, scene, settings=settings)
+    for entry in (map if task_map is None else task_map)(screen, packing):
         table.append(entry)
         if progress is not None:
             progress(entry)
@@ -368,10 +380,12 @@ def _content(scene) -> str:
                  scene.collision, scene.air))
 
 
-def choose_circuit(scene, progress: Callable[[Screening], None] | None = None) -> dict:
+def choose_circuit(scene, progress: Callable[[Screening], None] | None = None,
+                   task_map: Callable | None = None) -> dict:
     """``fold.circuit: auto`` of ``scene``: the best-ranked circuit of
-    :func:`rank_circuits` (default bounds), as the mapping ``fold.circuit_choice``
-    records (``index``, ``by``, ``outcome``, ``screened``, ``examined``,
+    :func:`rank_circuits` (the scene's ``screening``; ``progress`` and
+    ``task_map`` as there), as the mapping ``fold.circuit_choice`` records
+    (``index``, ``by``, ``outcome``, ``screened``, ``examined``,
     ``screening``). Ranked once per scene content in a process.
 
     Raises
@@ -382,7 +396,7 @@ def choose_circuit(scene, progress: Callable[[Screening], None] | None = None) -
     """
     key = _content(scene)
     if key not in _CHOSEN:
-        ranking = rank_circuits(scene, progress=progress)
+        ranking = rank_circuits(scene, progress=progress, task_map=task_map)
         best = ranking.best
         arr = scene.array
         if best is None:
@@ -400,7 +414,8 @@ def choose_circuit(scene, progress: Callable[[Screening], None] | None = None) -
     return dict(_CHOSEN[key])
 
 
-def resolve_circuit(scene, progress: Callable[[Screening], None] | None = None):
+def resolve_circuit(scene, progress: Callable[[Screening], None] | None = None,
+                    task_map: Callable | None = None):
     """``scene`` with ``fold.circuit: auto`` replaced by the chosen index
     (:func:`choose_circuit`), ``fold.circuit_choice`` saying how, in its
     sections and in the mapping it stores (what recordings and trajectory
@@ -413,7 +428,7 @@ def resolve_circuit(scene, progress: Callable[[Screening], None] | None = None):
     """
     if scene.fold.circuit != "auto":
         return scene
-    choice = choose_circuit(scene, progress)
+    choice = choose_circuit(scene, progress, task_map)
     data = scene.data
     if data is not None:
         data = {**data, "fold": {**(data.get("fold") or {}), "circuit": choice["index"],

@@ -14,6 +14,7 @@ import signal
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Callable
 
@@ -46,6 +47,10 @@ _WORKER_JOB = None
 def _init_worker(job):
     global _WORKER_JOB
     _WORKER_JOB = job
+    _guard_worker()
+
+
+def _guard_worker():
     # Ctrl-C and timeout(1) signal the whole process group: a worker ended by
     # that would break the pool under the parent, which is saving the best K
     # so far. The parent ends the workers (ProcessBackend.close), or, if it
@@ -81,17 +86,11 @@ class SerialBackend:
 
 
 class ProcessBackend:
-    """A pool of local worker processes, the job sent once to each.
-
-    Uses the forkserver start method: forking a process that already runs
-    threads (numba, a Dask client) can deadlock the child.
-    """
+    """A pool of local worker processes (:func:`_process_pool`), the job sent once to each."""
 
     def __init__(self, job: Job, workers: int):
         self.workers = workers
-        ctx = multiprocessing.get_context("forkserver" if os.name == "posix" else "spawn")
-        self._pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                                         initargs=(job,))
+        self._pool = _process_pool(workers, _init_worker, (job,))
 
     def map(self, kcs):
         return list(self._pool.map(_evaluate_in_worker, kcs))
@@ -120,19 +119,7 @@ class DaskBackend:
     """
 
     def __init__(self, job: Job, address: str, timeout: float = CONNECT_TIMEOUT):
-        try:
-            from distributed import Client
-        except ImportError:
-            raise OptimisationError("dask_address: the 'distributed' package is not installed "
-                                    "(pip install 'dask[distributed]')") from None
-        if not isinstance(address, str) or not address.strip():
-            raise OptimisationError(f"dask_address: expected a scheduler address such as "
-                                    f"tcp://host:8786, got {address!r}")
-        try:
-            self._client = Client(address, timeout=timeout, set_as_default=False)
-        except (OSError, TimeoutError, ValueError) as e:
-            raise OptimisationError(f"dask_address: cannot reach a Dask scheduler at {address!r} "
-                                    f"within {timeout:g} s ({type(e).__name__}: {e})") from None
+        self._client = _dask_client(address, timeout)
         self.workers = max(1, sum(self._client.nthreads().values()))
         self._job = self._client.scatter([job], broadcast=True)[0]
 
@@ -144,6 +131,44 @@ class DaskBackend:
         self._client.close()
 
 
+def _process_pool(workers: int, initializer, initargs=()) -> ProcessPoolExecutor:
+    """``workers`` local processes, each set up by ``initializer(*initargs)``.
+
+    The forkserver start method: forking a process that already runs threads
+    (numba, a Dask client) can deadlock the child.
+    """
+    ctx = multiprocessing.get_context("forkserver" if os.name == "posix" else "spawn")
+    return ProcessPoolExecutor(workers, mp_context=ctx, initializer=initializer,
+                               initargs=initargs)
+
+
+def _dask_client(address: str, timeout: float):
+    """A client of the Dask scheduler at ``address``; OptimisationError naming
+    ``dask_address`` if distributed is missing or nothing answers in ``timeout`` s."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise OptimisationError("dask_address: the 'distributed' package is not installed "
+                                "(pip install 'dask[distributed]')") from None
+    if not isinstance(address, str) or not address.strip():
+        raise OptimisationError(f"dask_address: expected a scheduler address such as "
+                                f"tcp://host:8786, got {address!r}")
+    try:
+        return Client(address, timeout=timeout, set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as e:
+        raise OptimisationError(f"dask_address: cannot reach a Dask scheduler at {address!r} "
+                                f"within {timeout:g} s ({type(e).__name__}: {e})") from None
+
+
+def _worker_count(workers) -> int:
+    """``workers`` as a count of processes: 0 or None all cores."""
+    if workers is None or workers == 0:
+        return os.cpu_count() or 1
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 0:
+        raise OptimisationError(f"workers: expected an integer >= 0, got {workers!r}")
+    return workers
+
+
 def make_backend(job: Job, workers: int | None = None, dask_address: str | None = None):
     """The backend asked for: Dask if ``dask_address``, else ``workers`` local processes.
 
@@ -151,11 +176,41 @@ def make_backend(job: Job, workers: int | None = None, dask_address: str | None 
     """
     if dask_address is not None:
         return DaskBackend(job, dask_address)
-    if workers is None or workers == 0:
-        workers = os.cpu_count() or 1
-    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 0:
-        raise OptimisationError(f"workers: expected an integer >= 0, got {workers!r}")
+    workers = _worker_count(workers)
     return SerialBackend(job) if workers == 1 else ProcessBackend(job, workers)
+
+
+@contextmanager
+def task_map(workers: int | None = None, dask_address: str | None = None):
+    """A ``map(fn, items)`` for independent picklable tasks (a ranking's
+    screenings, :func:`panel_deploy.fold.ranking.rank_circuits`) where the
+    evaluations of :func:`make_backend` would run: on the Dask scheduler at
+    ``dask_address``, else on ``workers`` local processes (0 or None: all
+    cores; 1: here, one after the other). Its results come in the order of
+    ``items``, each as soon as it and those before it are done. The workers
+    end with the context.
+
+    Raises
+    ------
+    OptimisationError
+        As :func:`make_backend`.
+    """
+    if dask_address is not None:
+        client = _dask_client(dask_address, CONNECT_TIMEOUT)
+        try:
+            yield lambda fn, items: (f.result() for f in client.map(fn, list(items), pure=False))
+        finally:
+            client.close()
+        return
+    workers = _worker_count(workers)
+    if workers == 1:
+        yield map
+        return
+    pool = _process_pool(workers, _guard_worker)
+    try:
+        yield pool.map
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 class BudgetExhausted(Exception):

@@ -275,7 +275,18 @@ def test_budget_is_respected():
     res = optimise(chain_model(), scene(max_evaluations=9), workers=1, evaluation=bowl_outcome)
     # K_0, then gradient batches of n + 1 = 4: the third batch would pass 9
     assert res.nfev == 8 and res.status == 1 and res.success
-    assert res.message == "collision-free and flat; stopped by the evaluation budget"
+    assert res.message == ("collision-free and flat; stopped by the evaluation budget "
+                           "(its next batch, 4 K, did not fit in the 1 left)")
+
+
+def test_a_budget_below_one_generation_says_so():
+    """Differential evolution evaluates 2 K per variable at once (6 here, K_0
+    among them, so 5 new): a budget that leaves fewer buys K_0 alone, and the
+    message says why."""
+    res = optimise(chain_model(), scene(max_evaluations=5, method="global"), workers=1,
+                   evaluation=plateau_outcome)
+    assert res.nfev == 1 and not res.success
+    assert res.message.endswith("the search's next batch (5 K) did not fit in the 4 left")
 
 
 def test_progress_reports_every_batch():

@@ -214,7 +214,8 @@ def task_map(workers: int | None = None, dask_address: str | None = None):
 
 
 class BudgetExhausted(Exception):
-    """Raised inside a solver's objective to stop it when the budget is spent."""
+    """Raised inside a solver's objective to stop it when the budget is spent;
+    ``args``: the new K of the batch that did not fit, and the evaluations left."""
 
 
 class Cancelled(Exception):
@@ -271,7 +272,7 @@ class Evaluator:
             if key not in self.cache and key not in todo:
                 todo[key] = (np.asarray(k, dtype=float), None if c is None else np.asarray(c, float))
         if self.nfev + len(todo) > self.max_evaluations:
-            raise BudgetExhausted
+            raise BudgetExhausted(len(todo), self.max_evaluations - self.nfev)
         if todo and self.stop is not None and self.stop():
             raise Cancelled
         if todo:

@@ -368,6 +368,7 @@ class _Ended:
     converged: bool = False          # the last local search converged
     nstarts: int = 0                 # local searches started
     budget_spent: bool = False
+    short: tuple = ()                # the batch that did not fit, the evaluations left
     interrupted: bool = False        # Ctrl-C, SIGTERM or stop: the best K so far
     initial: Evaluation | None = None
     centred: Evaluation | None = None  # the result moved to the middle of its c/k window
@@ -395,8 +396,9 @@ def _search(run: Run, method, restarts, rng) -> _Ended:
         if problem.damping_variable:
             x0 = damping_line(run, x0)
         ended.converged = k_search.search(x0, method, restarts, rng)
-    except BudgetExhausted:
+    except BudgetExhausted as e:
         ended.budget_spent = True
+        ended.short = e.args
     except (KeyboardInterrupt, Cancelled):
         # What was evaluated is still a result: the caller can save it.
         if evaluator.best is None:
@@ -431,11 +433,17 @@ def _result(run: Run, method, ended: _Ended, wall_time) -> OptimisationResult:
             "does not reach flat" if best.outcome.simulated else "fails to simulate")
         message = (f"no collision-free K reaching flat found in {evaluator.nfev} "
                    f"evaluations and {ended.nstarts} start(s); the best K {what}")
+        if ended.short:
+            # a budget below one generation of differential evolution (2 K per
+            # variable) buys only the line search: say so, not just the count
+            message += "; the search's next batch ({} K) did not fit in the {} left".format(
+                *ended.short)
     elif ended.converged:
         status, message = 0, "collision-free and flat; local search converged"
     else:
         status = 1
-        message = ("collision-free and flat; stopped by the evaluation budget"
+        message = ("collision-free and flat; stopped by the evaluation budget (its next "
+                   "batch, {} K, did not fit in the {} left)".format(*ended.short)
                    if ended.budget_spent else
                    "collision-free and flat; local search stopped before converging")
     if ended.centred is not None and not ended.interrupted:

@@ -201,9 +201,9 @@ def test_the_stacks_of_a_6x6_array_no_longer_pass_through_each_other(six_by_six)
 
 def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
     """rhs, the stiff terms and the contact onsets with one run's candidate
-    list of contact pairs (kernels.near_pairs), kept across the samples of a
-    6 x 6 deployment and rebuilt as the panels move, equal those testing
-    every pair, to the bit; at every sample each pair whose boxes overlap is
+    list of contact pairs (kernels.near_pairs) and the separating axes it
+    remembers, kept across the samples of a 6 x 6 deployment and rebuilt as
+    the panels move, equal those testing every pair, to the bit; at every sample each pair whose boxes overlap is
     on the list, and the list is a small part of the pairs."""
     _, model, result = six_by_six["true"]
     P = pack(model)

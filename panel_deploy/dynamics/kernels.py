@@ -41,6 +41,7 @@ from numba import njit
 from .._numba_cache import announce_compilation
 from ..boxes import contact as contact_of_boxes
 from ..boxes import scratch as box_scratch
+from ..boxes import separating_axis
 from . import articulated
 from .pack import EXACT, PENALTY, TREE
 
@@ -858,14 +859,16 @@ def near_pairs(P, contact):
     """An empty candidate list of the pairs of ``contact`` (``P.contact``, passed
     apart so that numba prunes it for None) for :func:`rhs`:
     (boxes it was built at (n + 1, 2, 3), NaN until its first use; the listed
-    pairs' rows (q,); their count (1,)). Mutable scratch of one run, never
-    shared between runs: it only spares :func:`panel_contacts` the box test
-    of pairs that cannot touch, so a run gives the same result to the bit
-    with it as without."""
+    pairs' rows (q,); their count (1,); each pair's last separating axis (q,),
+    :func:`boxes.separating_axis`). Mutable scratch of one run, never shared
+    between runs: it only spares :func:`panel_contacts` the box test of pairs
+    that cannot touch and most of the separating axes of those that do not,
+    so a run gives the same result to the bit with it as without."""
     q = 0
     if contact is not None:
         q = contact.shape[0]
-    return np.full((P.n + 1, 2, 3), np.nan), np.empty(q, np.int64), np.zeros(1, np.int64)
+    return (np.full((P.n + 1, 2, 3), np.nan), np.empty(q, np.int64), np.zeros(1, np.int64),
+            np.zeros(q, np.int64))
 
 
 @njit(cache=True)
@@ -876,7 +879,7 @@ def _near_rows(contact, box, near):
     out was NEAR_MARGIN apart along some axis then, and each of its boxes has
     moved at most half of that since: it is apart now, as
     :func:`_pair_apart` (``>=``) would find it."""
-    built, rows, count = near
+    built, rows, count = near[0], near[1], near[2]
     half = 0.5 * NEAR_MARGIN
     stale = False
     for x, x0 in zip(box.ravel(), built.ravel()):
@@ -905,12 +908,33 @@ def _candidates(P, contact, R, p, near):
     return box, _near_rows(contact, box, near)
 
 
+@njit(cache=True, inline='always')
+def _may_touch(contact, r, box, R, p, near):
+    """Whether pair r of ``P.contact`` may touch at poses (R, p): its
+    :func:`_boxes` ``box`` overlap and, with a candidate list ``near``
+    (:func:`near_pairs`), no separating axis was found, the one that
+    separated it last tried first (the pairs of a deploying array whose boxes
+    overlap are mostly apart: 221 of 222 on 10 x 10 at 0.1 s). False means
+    :func:`_pair_points` would find no point."""
+    if _pair_apart(contact, r, box):
+        return False
+    if near is None:
+        return True
+    a, b = int(contact[r, 0]), int(contact[r, 1])
+    axes = near[3]
+    k = separating_axis(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], axes[r])
+    if k < 0:
+        return True
+    axes[r] = k
+    return False
+
+
 @njit(cache=True)
 def _pair_points(P, contact, r, R, p, work):
     """Contact points of pair r of ``P.contact`` (:func:`boxes.contact`): their
     number and the normal from the pair's first body towards its second;
     points and depths are left in work; callers first skip the pairs
-    :func:`_pair_apart` rules out."""
+    :func:`_may_touch` rules out."""
     a, b = int(contact[r, 0]), int(contact[r, 1])
     return contact_of_boxes(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], work)
 
@@ -941,7 +965,7 @@ def panel_contacts(P, contact, R, p, w, vo, f, near):
     points, depths = work[-2], work[-1]
     box, rows = _candidates(P, contact, R, p, near)
     for r in rows:
-        if _pair_apart(contact, r, box):
+        if not _may_touch(contact, r, box, R, p, near):
             continue
         count, normal = _pair_points(P, contact, r, R, p, work)
         a, b = int(contact[r, 0]), int(contact[r, 1])
@@ -984,7 +1008,7 @@ def contact_onsets(P, contact, y, t, pressed, record, near=None):
     pressed[:] = False  # a pair off the list is apart
     for r in rows:
         was = before[r]
-        if _pair_apart(contact, r, box):
+        if not _may_touch(contact, r, box, R, p, near):
             continue
         count, normal = _pair_points(P, contact, r, R, p, work)
         pressed[r] = count > 0
@@ -1216,7 +1240,7 @@ def _pressed_points(P, contact, R, p, near):
     points, depths = work[-2], work[-1]
     box, candidates = _candidates(P, contact, R, p, near)
     for r in candidates:
-        if _pair_apart(contact, r, box):
+        if not _may_touch(contact, r, box, R, p, near):
             continue
         found, normal = _pair_points(P, contact, r, R, p, work)
         if count + found > rows.shape[0]:

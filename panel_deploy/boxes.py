@@ -115,17 +115,21 @@ def least_overlap(Ra, ca, ha, Rb, cb, hb, stop_below=-np.inf):
 @njit(cache=True)
 def separating_axis(Ra, ca, ha, Rb, cb, hb, first):
     """A candidate axis of :func:`least_overlap` (0-14) along which boxes a and
-    b (given as in :func:`separation`) do not overlap (overlap <= 0), trying
-    ``first`` before the others, or -1 if there is none: then, and only then,
+    b (given as in :func:`separation`) do not overlap, trying ``first`` before
+    the others: returns ``(k, overlap)``, the axis and the overlap along it
+    (m, <= 0), or ``(-1, inf)`` if there is none: then, and only then,
     ``least_overlap(...)[0] > 0`` and the boxes interfere. Moving bodies keep
     their separating axis for many evaluations, so the axis that separated a
     pair last time settles it at the cost of one axis in place of up to 15."""
-    if axis_overlap(Ra, ca, ha, Rb, cb, hb, first)[0] <= 0.0:
-        return first
+    overlap = axis_overlap(Ra, ca, ha, Rb, cb, hb, first)[0]
+    if overlap <= 0.0:
+        return first, overlap
     for k in range(15):
-        if k != first and axis_overlap(Ra, ca, ha, Rb, cb, hb, k)[0] <= 0.0:
-            return k
-    return -1
+        if k != first:
+            overlap = axis_overlap(Ra, ca, ha, Rb, cb, hb, k)[0]
+            if overlap <= 0.0:
+                return k, overlap
+    return -1, np.inf
 
 
 @njit(cache=True)

@@ -857,29 +857,44 @@ NEAR_MARGIN = 0.005
 @njit(cache=True)
 def near_pairs(P, contact):
     """An empty candidate list of the pairs of ``contact`` (``P.contact``, passed
-    apart so that numba prunes it for None) for :func:`rhs`:
-    (boxes it was built at (n + 1, 2, 3), NaN until its first use; the listed
-    pairs' rows (q,); their count (1,); each pair's last separating axis (q,),
-    :func:`boxes.separating_axis`). Mutable scratch of one run, never shared
-    between runs: it only spares :func:`panel_contacts` the box test of pairs
-    that cannot touch and most of the separating axes of those that do not,
-    so a run gives the same result to the bit with it as without."""
+    apart so that numba prunes it for None) for :func:`rhs`, a tuple:
+
+    0. the :func:`_boxes` it was built at (n + 1, 2, 3), NaN until its first use;
+    1. the listed pairs' rows (q,) and 2. their count (1,);
+    3. each pair's last separating axis (q,) (:func:`boxes.separating_axis`);
+    4. the bodies' rotations (n + 1, 3, 3) and 5. centres (n + 1, 3), m, when
+       it was built, and 6. how far any point of each body has moved since (n + 1,), m;
+    7. each pair's slack (q,), m: how much further its two bodies may move
+       together (by 6.) and stay apart, as the last test of the pair found it.
+
+    Mutable scratch of one run, never shared between runs: it only spares
+    :func:`panel_contacts` the tests of pairs that cannot touch, so a run
+    gives the same result to the bit with it as without."""
     q = 0
     if contact is not None:
         q = contact.shape[0]
     return (np.full((P.n + 1, 2, 3), np.nan), np.empty(q, np.int64), np.zeros(1, np.int64),
-            np.zeros(q, np.int64))
+            np.zeros(q, np.int64), np.empty((P.n + 1, 3, 3)), np.empty((P.n + 1, 3)),
+            np.empty(P.n + 1), np.full(q, -np.inf))
+
+
+#: Rounding allowance of a pair's slack (:func:`near_pairs`), m: a pair skipped
+#: on its slack is apart by more than this, far beyond the separating-axis
+#: test's rounding (~1e-16 m on panels of 0.1-1 m), so that test would find it
+#: apart too.
+SLACK_ROUNDING = 1e-9
 
 
 @njit(cache=True)
-def _near_rows(contact, box, near):
+def _near_rows(P, contact, box, R, p, near):
     """The rows of ``contact`` whose :func:`_boxes` ``box`` may overlap, from
     the candidate list ``near`` (:func:`near_pairs`), rebuilt first if a box
-    corner moved more than NEAR_MARGIN / 2 since it was built. A pair left
-    out was NEAR_MARGIN apart along some axis then, and each of its boxes has
-    moved at most half of that since: it is apart now, as
-    :func:`_pair_apart` (``>=``) would find it."""
-    built, rows, count = near[0], near[1], near[2]
+    corner moved more than NEAR_MARGIN / 2 since it was built, and each
+    body's motion since then at poses (R, p). A pair left out was
+    NEAR_MARGIN apart along some axis then, and each of its boxes has moved
+    at most half of that since: it is apart now, as :func:`_pair_apart`
+    (``>=``) would find it."""
+    built, rows, count, R0, p0, moved, slack = near[0], near[1], near[2], near[4], near[5], near[6], near[7]
     half = 0.5 * NEAR_MARGIN
     stale = False
     for x, x0 in zip(box.ravel(), built.ravel()):
@@ -888,45 +903,81 @@ def _near_rows(contact, box, near):
             break
     if stale:
         built[:] = box
+        R0[:] = R
+        p0[:] = p
+        slack[:] = -np.inf
         m = 0
         for r in range(contact.shape[0]):
             if not _pair_apart(contact, r, box, NEAR_MARGIN):
                 rows[m] = r
                 m += 1
         count[0] = m
+    for i in range(P.n + 1):
+        # |dp| + |dR|_F |h| bounds the motion of every point p + R u, |u| <= |h|
+        dp, dR = 0.0, 0.0
+        for k in range(3):
+            dp += (p[i, k] - p0[i, k]) ** 2
+            for m in range(3):
+                dR += (R[i, k, m] - R0[i, k, m]) ** 2
+        h = P.half[i]
+        moved[i] = math.sqrt(dp) + math.sqrt(dR) * math.sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2])
     return rows[:count[0]]
 
 
 @njit(cache=True, inline='always')
-def _candidates(P, contact, R, p, near):
-    """The :func:`_boxes` at poses (R, p) and the rows of ``contact`` to test
-    with :func:`_pair_apart`: those of the candidate list ``near``, or every
-    row for None."""
+def _box_gap(contact, r, box):
+    """The gap (m) between the :func:`_boxes` of pair r of ``P.contact``
+    along the ground axis that parts them most (< 0: they overlap)."""
+    a, b = int(contact[r, 0]), int(contact[r, 1])
+    gap = -np.inf
+    for k in range(3):
+        gap = max(gap, box[a, 0, k] - box[b, 1, k], box[b, 0, k] - box[a, 1, k])
+    return gap
+
+
+@njit(cache=True)
+def _touching(P, contact, R, p, near):
+    """The rows of ``contact`` (``P.contact``) whose pairs may touch at poses
+    (R, p): every other pair is apart, and :func:`_pair_points` would find
+    no point of it.
+
+    Without a candidate list (``near`` None) the pairs whose :func:`_boxes`
+    overlap. With one (:func:`near_pairs`), of its pairs: those whose bodies
+    have moved less than their slack since their last test are apart; the
+    rest get the box test, then the separating axes, the one that separated
+    the pair last first (while an array deploys, most pairs whose boxes
+    overlap are apart: 221 of 222 on 10 x 10 at 0.1 s), and the gap found
+    sets the slack. One loop here, not a call a pair: passing the list to a
+    function costs ~60 ns a call in reference counts, more than the test.
+    """
     box = _boxes(P, R, p)
     if near is None:
-        return box, np.arange(contact.shape[0])
-    return box, _near_rows(contact, box, near)
-
-
-@njit(cache=True, inline='always')
-def _may_touch(contact, r, box, R, p, near):
-    """Whether pair r of ``P.contact`` may touch at poses (R, p): its
-    :func:`_boxes` ``box`` overlap and, with a candidate list ``near``
-    (:func:`near_pairs`), no separating axis was found, the one that
-    separated it last tried first (the pairs of a deploying array whose boxes
-    overlap are mostly apart: 221 of 222 on 10 x 10 at 0.1 s). False means
-    :func:`_pair_points` would find no point."""
-    if _pair_apart(contact, r, box):
-        return False
-    if near is None:
-        return True
-    a, b = int(contact[r, 0]), int(contact[r, 1])
-    axes = near[3]
-    k = separating_axis(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], axes[r])
-    if k < 0:
-        return True
-    axes[r] = k
-    return False
+        out = np.empty(contact.shape[0], np.int64)
+        m = 0
+        for r in range(contact.shape[0]):
+            if not _pair_apart(contact, r, box):
+                out[m] = r
+                m += 1
+        return out[:m]
+    rows = _near_rows(P, contact, box, R, p, near)
+    axes, moved, slack = near[3], near[6], near[7]
+    out = np.empty(rows.shape[0], np.int64)
+    m = 0
+    for r in rows:
+        a, b = int(contact[r, 0]), int(contact[r, 1])
+        if moved[a] + moved[b] < slack[r]:
+            continue
+        gap = _box_gap(contact, r, box)
+        if not gap >= 0.0:  # NaN poses as well: the contact is left to find them
+            k, overlap = separating_axis(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], axes[r])
+            if k < 0:
+                out[m] = r
+                m += 1
+                continue
+            axes[r], gap = k, -overlap
+        # apart by gap now, so by gap - (moved now + moved later) later
+        slack[r] = gap - moved[a] - moved[b] - SLACK_ROUNDING
+    return out[:m]
 
 
 @njit(cache=True)
@@ -934,7 +985,7 @@ def _pair_points(P, contact, r, R, p, work):
     """Contact points of pair r of ``P.contact`` (:func:`boxes.contact`): their
     number and the normal from the pair's first body towards its second;
     points and depths are left in work; callers first skip the pairs
-    :func:`_may_touch` rules out."""
+    :func:`_touching` rules out."""
     a, b = int(contact[r, 0]), int(contact[r, 1])
     return contact_of_boxes(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], work)
 
@@ -963,10 +1014,7 @@ def panel_contacts(P, contact, R, p, w, vo, f, near):
     power = 0.0
     work = box_scratch()
     points, depths = work[-2], work[-1]
-    box, rows = _candidates(P, contact, R, p, near)
-    for r in rows:
-        if not _may_touch(contact, r, box, R, p, near):
-            continue
+    for r in _touching(P, contact, R, p, near):
         count, normal = _pair_points(P, contact, r, R, p, work)
         a, b = int(contact[r, 0]), int(contact[r, 1])
         k, c = contact[r, 8], contact[r, 9]
@@ -1003,13 +1051,10 @@ def contact_onsets(P, contact, y, t, pressed, record, near=None):
     R, p, w, vo, _ = kinematics(P, y[:n], y[n:2 * n])
     work = box_scratch()
     points = work[-2]
-    box, rows = _candidates(P, contact, R, p, near)
     before = pressed.copy()
-    pressed[:] = False  # a pair off the list is apart
-    for r in rows:
+    pressed[:] = False  # a pair not touching is apart
+    for r in _touching(P, contact, R, p, near):
         was = before[r]
-        if not _may_touch(contact, r, box, R, p, near):
-            continue
         count, normal = _pair_points(P, contact, r, R, p, work)
         pressed[r] = count > 0
         if was or count == 0:
@@ -1238,10 +1283,7 @@ def _pressed_points(P, contact, R, p, near):
         return count, rows
     work = box_scratch()
     points, depths = work[-2], work[-1]
-    box, candidates = _candidates(P, contact, R, p, near)
-    for r in candidates:
-        if not _may_touch(contact, r, box, R, p, near):
-            continue
+    for r in _touching(P, contact, R, p, near):
         found, normal = _pair_points(P, contact, r, R, p, work)
         if count + found > rows.shape[0]:
             grown = np.empty((2 * rows.shape[0] + found, 8))

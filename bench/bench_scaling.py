@@ -38,8 +38,9 @@ atol rtol / 100), its wall time per simulated second and how far its first
 collision moves from the one at the scene's tolerances.
 
 Then the exponent of each figure against n, the number of bodies, by least
-squares on log-log over the five scenes. Everything printed is also written
-to ``--out``.
+squares on log-log over the five scenes, and whether issue 33's goals are met
+(``GOAL_EXPONENT``, ``GOAL_LARGEST``). Everything printed is also written to
+``--out``.
 """
 
 from __future__ import annotations
@@ -70,6 +71,10 @@ MIN_SAMPLES = 200
 #: rtol / 100, as the scene's; and the scene's rtol with a looser atol, which on
 #: the larger arrays sets the step count (the hinges ringing on their stops).
 LOOSER = ((1e-6, 1e-6), (1e-4, 1e-6), (1e-3, 1e-5))
+#: Issue 33's goals: the exponent of the wall time per simulated second against
+#: the bodies, and the largest array's wall s per simulated s on this machine.
+GOAL_EXPONENT = 1.5
+GOAL_LARGEST = 2.0
 
 
 def first_packing(rows: int, cols: int) -> int:
@@ -229,6 +234,12 @@ def main(argv=None):
                       ("before", "check per sample, before (prune off)"),
                       ("after", "check per sample, after (prune on)"), ("dj", "D_j per sample (refine off)")):
         lines.append(f"  {name:40s} {exponent(n, [x[key] for x in rows]):5.2f}")
+    largest, overall = rows[-1], exponent(n, [x["sim_per_s"] for x in rows])
+    lines += ["", "issue 33's goals, at the scene's tolerances:",
+              f"  exponent of wall s per simulated s <= {GOAL_EXPONENT}: {overall:.2f}, "
+              f"{'met' if overall <= GOAL_EXPONENT else 'not met'}",
+              f"  {largest['label']} under {GOAL_LARGEST} s per simulated s: {largest['sim_per_s']:.2f} s, "
+              f"{'met' if largest['sim_per_s'] < GOAL_LARGEST else 'not met'}"]
     lines += ["", "error against run time: one run at each looser (rtol, atol) (the scene's "
               "are 1e-6, 1e-8), wall s per simulated s, and its first collision's time less "
               "the scene's:"]

@@ -833,17 +833,23 @@ def _boxes(P, R, p):
 
 
 @njit(cache=True, inline='always')
-def _pair_apart(contact, r, box, margin=0.0):
-    """Whether the :func:`_boxes` of pair r of ``P.contact`` are apart (by at
-    least ``margin``, m): the test that spares most pairs of a large array the
-    separating axes (six comparisons a pair; with every pair of a 10 x 10
-    array in contact, 3569, the per-pair box cost the right-hand side ~30 us)."""
+def _box_gap(contact, r, box):
+    """The gap (m) between the :func:`_boxes` of pair r of ``P.contact``
+    along the ground axis that parts them most (< 0: they overlap)."""
     a, b = int(contact[r, 0]), int(contact[r, 1])
+    gap = -np.inf
     for k in range(3):
-        # boxes that only touch are apart: a contact needs some depth
-        if box[a, 0, k] >= box[b, 1, k] + margin or box[b, 0, k] >= box[a, 1, k] + margin:
-            return True
-    return False
+        gap = max(gap, box[a, 0, k] - box[b, 1, k], box[b, 0, k] - box[a, 1, k])
+    return gap
+
+
+@njit(cache=True, inline='always')
+def _pair_apart(contact, r, box, margin=0.0):
+    """Whether the :func:`_boxes` of pair r of ``P.contact`` are apart by at
+    least ``margin`` (m; boxes that only touch are apart, a contact needs
+    some depth): the test that spares most pairs of a large array the
+    separating axes."""
+    return _box_gap(contact, r, box) >= margin
 
 
 #: Margin of the candidate list of panel contact pairs (:func:`near_pairs`),
@@ -922,17 +928,6 @@ def _near_rows(P, contact, box, R, p, near):
         h = P.half[i]
         moved[i] = math.sqrt(dp) + math.sqrt(dR) * math.sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2])
     return rows[:count[0]]
-
-
-@njit(cache=True, inline='always')
-def _box_gap(contact, r, box):
-    """The gap (m) between the :func:`_boxes` of pair r of ``P.contact``
-    along the ground axis that parts them most (< 0: they overlap)."""
-    a, b = int(contact[r, 0]), int(contact[r, 1])
-    gap = -np.inf
-    for k in range(3):
-        gap = max(gap, box[a, 0, k] - box[b, 1, k], box[b, 0, k] - box[a, 1, k])
-    return gap
 
 
 @njit(cache=True)

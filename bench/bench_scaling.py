@@ -1,6 +1,7 @@
 """How the simulation and the collision check grow with the array (issue 33).
 
-    python bench/bench_scaling.py [--repeats N] [--closure exact] [--out bench/results/scaling.txt]
+    python bench/bench_scaling.py [--repeats N] [--closure exact] [--stop-ramp RAD]
+                                  [--out bench/results/scaling.txt]
 
 Scenes: the paper's 4 x 4 scene as it is, and the first circuit that packs of
 5 x 6, 6 x 6, 8 x 8 and 10 x 10, as issue 33 measured them
@@ -10,7 +11,10 @@ Scenes: the paper's 4 x 4 scene as it is, and the first circuit that packs of
 5 ms as the scene. The larger arrays run with panel-to-panel contact
 (``contact.panels=true``, every unhinged pair), without which their panels
 pass through each other in the stowed stacks within 0.02-0.06 s
-(docs/findings.md 3.2); the paper scene without, as it is.
+(docs/findings.md 3.2), and with ramped joint stops (``contact.stop_ramp``,
+``--stop-ramp``, default ``STOP_RAMP``: the stowed stack's hinges chatter on
+their stops, and the paper's stop, whose damper comes in at once, made most of
+the rejected steps there); the paper scene without either, as it is.
 The circuits close one loop each (one cut hinge; the paper scene's penalty
 closure, or with ``--closure exact`` the exact one), so from 5 x 6 on the
 dynamics take the O(n) articulated path (``dynamics.articulated``); the paper
@@ -35,7 +39,9 @@ Per scene (medians of ``--repeats`` runs, wall clock, 2 shared cores):
 Error against run time: each scene once more at each (rtol, atol) of
 ``LOOSER`` (the scene's rtol with atol 1e-6, then rtol 1e-4 and 1e-3 with
 atol rtol / 100), its wall time per simulated second and how far its first
-collision moves from the one at the scene's tolerances.
+collision moves from the one at the scene's tolerances. Then the larger arrays
+once with the paper's stops (ramp 0): wall time per simulated second, steps,
+the ratio to the ramped run and how far the first collision moves.
 
 Then the exponent of each figure against n, the number of bodies, by least
 squares on log-log over the five scenes, and whether issue 33's goals are met
@@ -75,6 +81,10 @@ LOOSER = ((1e-6, 1e-6), (1e-4, 1e-6), (1e-3, 1e-5))
 #: the bodies, and the largest array's wall s per simulated s on this machine.
 GOAL_EXPONENT = 1.5
 GOAL_LARGEST = 2.0
+#: contact.stop_ramp of the larger arrays, rad: a tenth of the smallest stop
+#: overshoot measured on the paper scene (0.2 mrad at k_s = 5000, 0.6 at its
+#: 1000), and 10 um at a 0.1 m panel's edge, the depth of the panel contacts' ramp.
+STOP_RAMP = 1e-4
 
 
 def first_packing(rows: int, cols: int) -> int:
@@ -82,14 +92,15 @@ def first_packing(rows: int, cols: int) -> int:
     return next(i for i, d in fold.designs(rows, cols) if d.stowed is not None)
 
 
-def scene_of(rows, cols, t_end, closure):
-    """The scene of one case (a larger array's loop closed by ``closure``) and its label."""
+def scene_of(rows, cols, t_end, closure, stop_ramp):
+    """The scene of one case (a larger array's loop closed by ``closure``, its
+    joint stops ramped over ``stop_ramp`` rad) and its label."""
     samples = [f"simulation.t_end={t_end}", f"simulation.samples={round(t_end / SAMPLE_INTERVAL) + 1}"]
     if rows is None:
         return load_scene(SCENE, samples), "4 x 4 paper"
     n = first_packing(rows, cols)
     sets = [f"array.rows={rows}", f"array.cols={cols}", f"fold.circuit={n}", "fold.ground=null",
-            "contact.panels=true", f"closure.method={closure}"]
+            "contact.panels=true", f"closure.method={closure}", f"contact.stop_ramp={stop_ramp}"]
     return load_scene(SCENE, sets + samples), f"{rows} x {cols} circuit {n}"
 
 
@@ -135,8 +146,8 @@ def same(a, b) -> bool:
     return events and ra.v == rb.v and ra.d == rb.d and np.array_equal(ra.distances, rb.distances)
 
 
-def measure(rows, cols, t_end, repeats, closure):
-    scene, label = scene_of(rows, cols, t_end, closure)
+def measure(rows, cols, t_end, repeats, closure, stop_ramp):
+    scene, label = scene_of(rows, cols, t_end, closure, stop_ramp)
     model = build_model(scene)
     runs, cpu = [], []
     for _ in range(repeats):
@@ -158,8 +169,12 @@ def measure(rows, cols, t_end, repeats, closure):
     refine_off = CollisionSettings.from_scene(scene, refine=False)
     dj = statistics.median(d_j_per_sample(model, result, refine_off) for _ in range(repeats))
     report = on.report()
-    sweep = [tolerance_run(scene, model, rtol, atol, report.first_collision)
+    sweep = [(rtol, atol, *compare_run(with_tolerances(scene, rtol, atol), model, report.first_collision))
              for rtol, atol in LOOSER]
+    paper_stops = None
+    if rows is not None:
+        plain = scene_of(rows, cols, t_end, closure, 0.0)[0]
+        paper_stops = compare_run(plain, build_model(plain), report.first_collision)
     return dict(
         label=label, bodies=model.n_bodies, joints=model.n_coords, pairs=len(model.collision_pairs),
         t_end=t_end, steps=result.nsteps, sim_per_s=wall / result.t[-1], per_step=wall / result.nsteps,
@@ -168,15 +183,19 @@ def measure(rows, cols, t_end, repeats, closure):
         ratio=statistics.median(ratio), dj=dj,
         exact=report.counters["exact_pairs"] / report.counters["samples"], checked=report.counters["samples"],
         identical=same(off, on),
-        contacts=len(model.contact_pairs), outcome=outcome(report), sweep=sweep)
+        contacts=len(model.contact_pairs), outcome=outcome(report), sweep=sweep, paper_stops=paper_stops)
 
 
-def tolerance_run(scene, model, rtol, atol, reference):
-    """One run at a looser (rtol, atol): wall s per simulated s, and how far its
-    first collision is from ``reference`` (the scene's tolerances): the time
+def with_tolerances(scene, rtol, atol):
+    """``scene`` integrated at (rtol, atol)."""
+    return replace(scene, simulation=replace(scene.simulation, rtol=rtol, atol=atol))
+
+
+def compare_run(scene, model, reference):
+    """One run of ``scene``: wall s per simulated s, accepted steps, and how far
+    its first collision is from ``reference`` (the bench's own run): the time
     difference (s), or why it cannot be compared."""
-    sim = replace(scene.simulation, rtol=rtol, atol=atol)
-    result = simulate(model, sim)
+    result = simulate(model, scene.simulation)
     event = check_trajectory(model, result, CollisionSettings.from_scene(scene)).first_collision
     if (event is None) != (reference is None):
         error = "a different verdict"
@@ -186,7 +205,7 @@ def tolerance_run(scene, model, rtol, atol, reference):
         error = f"{event.t - reference.t:+.4f} s, another pair"
     else:
         error = f"{event.t - reference.t:+.5f} s"
-    return rtol, atol, result.wall_time / result.t[-1], error
+    return result.wall_time / result.t[-1], result.nsteps, error
 
 
 def outcome(report) -> str:
@@ -208,11 +227,16 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--closure", choices=("penalty", "exact"), default="penalty",
                     help="loop closure of the larger arrays (the paper scene keeps its own)")
+    ap.add_argument("--stop-ramp", type=float, default=STOP_RAMP, metavar="RAD",
+                    help="contact.stop_ramp of the larger arrays (0: the paper's stops)")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "scaling.txt")
     args = ap.parse_args(argv)
     start = time.perf_counter()
-    rows = [measure(r, c, t, args.repeats, args.closure) for r, c, t in CASES]
-    lines = [f"bench_scaling: larger arrays closed by {args.closure}; "
+    if not 0.0 <= args.stop_ramp <= 0.01:
+        ap.error(f"--stop-ramp: {args.stop_ramp:g} rad is outside [0, 0.01]")
+    rows = [measure(r, c, t, args.repeats, args.closure, args.stop_ramp) for r, c, t in CASES]
+    lines = [f"bench_scaling: larger arrays closed by {args.closure}, joint stops ramped over "
+             f"{args.stop_ramp:g} rad; "
              f"medians of {args.repeats} runs, 2 shared cores, load average "
              f"{open('/proc/loadavg').read().split()[0]}; n = bodies (after merging); "
              f"check times per sample up to the first collision, refinement on",
@@ -246,7 +270,15 @@ def main(argv=None):
     for x in rows:
         lines.append(f"  {x['label']:22s} " + "; ".join(
             f"{rtol:g}/{atol:g}: {per_s:6.2f} s/s, {error}"
-            for rtol, atol, per_s, error in x["sweep"]))
+            for rtol, atol, per_s, _, error in x["sweep"]))
+    lines += ["", "the paper's stops (contact.stop_ramp 0) on the larger arrays, one run: wall s per "
+              "simulated s, steps, both as ratios to the ramped run, and its first collision's time "
+              "less the ramped run's:"]
+    for x in rows:
+        if x["paper_stops"] is not None:
+            per_s, steps, error = x["paper_stops"]
+            lines.append(f"  {x['label']:22s} {per_s:6.2f} s/s ({per_s / x['sim_per_s']:.2f}x), "
+                         f"{steps} steps ({steps / x['steps']:.2f}x), {error}")
     lines += ["", "before / after, median of the per-sample ratios: "
               + ", ".join(f"{x['label']} {x['ratio']:.2f}" for x in rows),
               f"total bench time {time.perf_counter() - start:.0f} s"]

@@ -183,7 +183,8 @@ def build_model(scene: Scene, design=None) -> Model:
         model = Model.build(bodies, hinges, ground, cut_hinges=cuts, k_s=scene.contact.k_s,
                             c_s=scene.contact.c_s, closure=closure, gravity=scene.gravity,
                             name=scene.name or "", hinge_groups=groups,
-                            air=AirParameters(scene.air.density, scene.air.drag_coefficient))
+                            air=AirParameters(scene.air.density, scene.air.drag_coefficient),
+                            stop_ramp=scene.contact.stop_ramp)
     except Exception as e:  # ModelError from a bad cut list
         if cuts is not None:
             raise SceneError("closure.cut_hinge", str(e)) from None

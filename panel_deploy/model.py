@@ -245,6 +245,10 @@ class Model:
         panel contacts of :mod:`panel_deploy.contacts` (default: none).
     k_p, c_p : float
         Normal stiffness (N/m) and damping (N s/m) of a panel contact.
+    stop_ramp : float
+        Depth past a joint limit (rad) over which k_s and c_s come in
+        smoothly (:func:`~panel_deploy.dynamics.kernels.stop_engagement`);
+        0 (default): at once, the paper's Eq. (4).
     """
 
     bodies: tuple
@@ -266,6 +270,7 @@ class Model:
     contact_pairs: tuple = ()
     k_p: float = 0.0
     c_p: float = 0.0
+    stop_ramp: float = 0.0
 
     def __post_init__(self):
         _freeze(self, gravity=(3,))
@@ -309,7 +314,7 @@ class Model:
     @classmethod
     def build(cls, bodies, hinges, ground=0, *, cut_hinges=None, k_s=0.0, c_s=0.0,
               closure=ClosureParameters(), gravity=(0.0, 0.0, 0.0), name="", hinge_groups=(),
-              air=AirParameters()):
+              air=AirParameters(), stop_ramp=0.0):
         """Build a model: spanning tree from the ground, cut hinges, collision pairs.
 
         Parameters
@@ -321,7 +326,7 @@ class Model:
         cut_hinges : sequence of int, optional
             Hinges to cut, one per independent loop. By default, for each loop
             the hinge farthest from the ground (breadth-first) is cut.
-        k_s, c_s, closure, gravity, name, hinge_groups, air
+        k_s, c_s, closure, gravity, name, hinge_groups, air, stop_ramp
             See the class attributes.
 
         Raises
@@ -372,7 +377,8 @@ class Model:
         return cls(tuple(bodies), tuple(hinges), ground, tuple(joints), tuple(parent),
                    tuple(body_joint), tuple(order), cut_hinges, float(k_s), float(c_s),
                    closure, gravity, pairs, str(name),
-                   tuple(tuple(int(i) for i in g) for g in hinge_groups), air)
+                   tuple(tuple(int(i) for i in g) for g in hinge_groups), air,
+                   stop_ramp=float(stop_ramp))
 
 
 def hinge_order(model: Model) -> list:

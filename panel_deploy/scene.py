@@ -360,6 +360,10 @@ class ContactSection:
                       "joint-limit contact stiffness, Eq. (4)")
     c_s: float = spec(0.5, number(0.0, 1e6, why=_WHY_STIFF), "N m s/rad",
                       "joint-limit contact damping, Eq. (4)")
+    stop_ramp: float = spec(0.0, number(0.0, 0.01, why="deeper, the ramp is the stop: its overshoot "
+                                                     "is milliradians"), "rad",
+                            "depth past a joint limit over which k_s and c_s come in smoothly "
+                            "(0: at once, Eq. 4)")
     panels: bool = spec(True, boolean, "", "contact between unhinged panels")
     k_p: float = spec(1.0e7, number(0, 1e11, low_open=True, why=_WHY_STIFF), "N/m",
                       "normal stiffness of one panel-to-panel contact pressed evenly")
@@ -408,7 +412,8 @@ class SimulationSection:
     samples: int = spec(301, integer(3, MAX_SAMPLES, "memory: every sample stores the pose and "
                                                      "velocity of every body"), "",
                         "number s of evenly spaced sample instants t_j")
-    events: bool = spec(True, boolean, "", "locate joint-limit contact switches as solver events")
+    events: bool = spec(True, boolean, "", "locate joint-limit contact switches as solver events "
+                        "(not with a contact.stop_ramp: a ramped stop has no jump to locate)")
     flat_tolerance: float = spec(0.05, number(0, low_open=True), "rad",
                                  "the array counts as flat (deployed) at the first sample where "
                                  "every hinge has |theta| <= this")

@@ -5,6 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
 
 from panel_deploy.build import build_model
 from panel_deploy.dynamics import Status, simulate, simulate_segments
@@ -367,3 +368,31 @@ def test_a_tolerance_below_double_precision_ends_in_seconds_not_minutes():
                                           samples=11), state)
     assert not r.success and r.status == Status.BUDGET_EXHAUSTED and "on pace" in r.message
     assert r.nsteps == 2_000_000 // 100
+
+
+@pytest.mark.parametrize("ramp", [0.0, 4e-4, 4e-3])
+def test_plate_settles_on_its_stop_where_the_stop_law_balances_gravity(ramp):
+    """Gravity lays the plate on its flat stop (theta < 0): it settles where the
+    hinge spring, the stop's spring (contact.stop_ramp: within the ramp, past
+    it, or none) and gravity's torque about the hinge line balance."""
+    model = dataclasses.replace(plate_on_hinge(k_s=10.0, c_s=0.05, gravity=(0.0, 0.0, -9.81)),
+                                stop_ramp=ramp)
+    h, body = model.hinges[0], model.bodies[1]
+    r0 = body.flat_position - h.point
+
+    def torque(theta):
+        a, D = -theta, ramp
+        x = a / D if D else 1.0
+        stop = 10.0 * D * (x**3 - 0.5 * x**4) if a < D else 10.0 * (a - 0.5 * D)
+        tau_g = h.axis @ np.cross(axis_rotation(h.axis, theta) @ r0, body.mass * model.gravity)
+        return -h.k_hinge * theta + stop + tau_g
+
+    rest = brentq(torque, -0.05, 0.0)
+    r = simulate(model, SimulationSection(t_end=3.0, method="compiled", rtol=1e-9, atol=1e-12,
+                                          samples=31), State(0.0, np.array([0.2]), np.zeros(1)))
+    assert r.success, r.message
+    assert r.theta[:, 0].min() < 0                      # it did fall onto the stop
+    assert r.theta[-1, 0] == pytest.approx(rest, abs=1e-9)
+    assert abs(r.omega[-1, 0]) < 1e-8
+    E = total_energy(r.energy)
+    assert np.abs(E - E[0]).max() < 1e-6 * np.ptp(r.energy["gravity"])

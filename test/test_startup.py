@@ -50,7 +50,7 @@ os.access = lambda p, m, **kw: False if pathlib.Path(p) == pkg else real_access(
 import numba
 from panel_deploy.dynamics import kernels
 print(numba.config.CACHE_DIR)
-print(kernels.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5)[0])
+print(kernels.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5, 0.0)[0])
 """
 
 
@@ -69,7 +69,7 @@ def test_read_only_package_caches_in_user_folder(tmp_path):
 
 NOTICE_RUN = """
 from panel_deploy.dynamics import kernels
-kernels.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5)
+kernels.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5, 0.0)
 kernels.contact_mode(1.0)
 """
 
@@ -104,7 +104,7 @@ TWO_KERNELS = """
 import sys
 from panel_deploy.dynamics import kernels
 from panel_deploy import _numba_cache
-kernels.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5)
+kernels.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5, 0.0)
 if sys.argv[1:] == ["build"]:
     _numba_cache.COMPILED_MARKER.write_text("test")
 else:

@@ -118,6 +118,13 @@ def _hermite(th0, w0, th1, w1, h, s):
             + (-2 * s3 + 3 * s2) * th1 + (s3 - s2) * h * w1)
 
 
+def locates(P, settings) -> bool:
+    """Whether a run locates the contact switches: ``settings.events``, and the
+    stops of the paper's law (``P.stop_ramp`` 0), whose torque jumps at the
+    switch; with a ramp it has no kink there to locate."""
+    return bool(settings.events) and P.stop_ramp == 0.0
+
+
 @njit(cache=True)
 def first_switch(n, y0, y1, h, tol):
     """Fraction of the step (0..1) at which the first tree hinge changes contact
@@ -490,7 +497,7 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
             try:
                 j, status, code = loop(
                     P, t_eval, Y, onsets, pressed, j, int(stop), carry, counts, settings.rtol,
-                    settings.atol, settings.max_step, settings.events, max_steps, gap_limit)
+                    settings.atol, settings.max_step, locates(P, settings), max_steps, gap_limit)
             except ZeroDivisionError:  # numba's float division by an underflowed zero
                 status, code = -1, -Status.NON_FINITE
         message = _FAILURES.get(code, "")
@@ -572,7 +579,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
                 status, message = Status.NON_FINITE, f"non-finite state at t = {solver.t:.6g} s"
                 break
             nsteps += 1
-            if settings.events and not landed:
+            if locates(P, settings) and not landed:
                 frac = first_switch(n, y_old, y_new, solver.t - t_old, settings.atol)
                 if EDGE < frac < 1.0 - EDGE:
                     dt = solver.t - t_old

@@ -28,7 +28,9 @@ spring (paper, text below Eq. 4): ``tau = -k theta - c omega`` plus, past a
 limit, ``-k_s (theta - pi) - c_s omega`` (theta > pi) or ``-k_s theta - c_s
 omega`` (theta < 0). So the hinge spring keeps acting in contact; the printed
 Eq. (4) drops ``-k theta`` for theta > pi, a difference of k pi against the
-k_s term, which dominates within the 0.1 % penetration it allows.
+k_s term, which dominates within the 0.1 % penetration it allows. A scene's
+``contact.stop_ramp`` brings k_s and c_s in smoothly over its first radians
+past the limit (:func:`stop_engagement`); 0 is the paper's law.
 """
 
 from __future__ import annotations
@@ -55,21 +57,46 @@ ZERO3 = (0.0, 0.0, 0.0)
 
 
 @njit(cache=True)
-def hinge_law(theta, omega, k, c, k_s, c_s):
-    """Torque (N m), stored energy (J) and damper power (W) of one hinge, Eq. (2)-(4)."""
+def hinge_law(theta, omega, k, c, k_s, c_s, ramp):
+    """Torque (N m), stored energy (J) and damper power (W) of one hinge, Eq. (2)-(4),
+    the stop's spring and damper coming in over the first ``ramp`` rad past a
+    limit (:func:`stop_engagement`; 0: at once, the paper's law)."""
     tau = -k * theta - c * omega
     energy = 0.5 * k * theta * theta
     power = c * omega * omega
-    if theta > PI:
-        d = theta - PI
-        tau -= k_s * d + c_s * omega
-        energy += 0.5 * k_s * d * d
-        power += c_s * omega * omega
-    elif theta < 0.0:
-        tau -= k_s * theta + c_s * omega
-        energy += 0.5 * k_s * theta * theta
-        power += c_s * omega * omega
+    if theta > PI or theta < 0.0:
+        d = theta - PI if theta > PI else theta
+        a = abs(d)
+        if a < ramp:
+            x = a / ramp
+            spring = k_s * ramp * x ** 3 * (1.0 - 0.5 * x)
+            energy += k_s * ramp * ramp * x ** 4 * (0.25 - 0.1 * x)
+        else:
+            spring = k_s * (a - 0.5 * ramp)
+            energy += 0.5 * k_s * a * a - k_s * ramp * (0.5 * a - 0.15 * ramp)
+        damping = c_s * stop_engagement(a, ramp)
+        tau -= math.copysign(spring, d) + damping * omega
+        power += damping * omega * omega
     return tau, energy, power
+
+
+@njit(cache=True, inline='always')
+def stop_engagement(depth, ramp):
+    """The share (0..1) of k_s and c_s acting at ``depth`` rad past a limit:
+    ``3 x^2 - 2 x^3`` of ``x = depth / ramp`` within the ramp, 1 beyond it.
+
+    The paper's stop (ramp 0) takes its whole damper at first touch, so its
+    torque jumps there by c_s omega and an explicit step that crosses the
+    limit errs by O(h); hinges chattering on their stops in a stowed stack
+    then cost most of a run's rejected steps (issue 33, 10 x 10). With the
+    ramp the torque is twice continuously differentiable in theta (the
+    spring's stiffness is k_s times this share), as Hunt and Crossley's
+    impact law removes the jump of a linear dashpot at first touch.
+    """
+    if depth >= ramp:
+        return 1.0
+    x = depth / ramp
+    return x * x * (3.0 - 2.0 * x)
 
 
 @njit(cache=True)
@@ -406,7 +433,7 @@ def cut_forces(P, R, p, w, vo):
         a, b = P.cut_a[j], P.cut_b[j]
         theta, g = _cut_angle(P, j, R)
         omega = _dot(g, _sub(_get(w, b), _get(w, a)))
-        tau, e, pw = hinge_law(theta, omega, P.cut_k[j], P.cut_c[j], P.k_s, P.c_s)
+        tau, e, pw = hinge_law(theta, omega, P.cut_k[j], P.cut_c[j], P.k_s, P.c_s, P.stop_ramp)
         energy += e
         power += pw
         _add_wrench(F, b, _scale(g, tau), ZERO3, ZERO3)
@@ -1115,7 +1142,7 @@ def _bias(P, theta, omega, kin, Jb, hb, near):
     dissipation += pw
     Q = np.empty(n)
     for i in range(n - 1, -1, -1):
-        tau, e, pw = hinge_law(theta[i], omega[i], P.k[i], P.c[i], P.k_s, P.c_s)
+        tau, e, pw = hinge_law(theta[i], omega[i], P.k[i], P.c[i], P.k_s, P.c_s, P.stop_ramp)
         spring += e
         dissipation += pw
         Q[i] = tau - _dot6(S, i, _get(f, i), _get(f, i, 3))
@@ -1316,12 +1343,21 @@ def _contact_rows(P, contact, pressed, S, U, kk, cc, start):
 
 
 @njit(cache=True, inline='always')
+def _stop_share(P, theta):
+    """:func:`stop_engagement` of a hinge at theta (0 within its limits)."""
+    if contact_mode(theta) == 1:
+        return 0.0
+    return stop_engagement(theta - PI if theta > PI else -theta, P.stop_ramp)
+
+
+@njit(cache=True, inline='always')
 def stiff_terms(P, y, near=None):
     """The stiff springs and dampers in joint space, ``K = diag(Kd) + U^T
     diag(kk) U`` and ``C = diag(Cd) + U^T diag(cc) U`` (N m/rad, N m s/rad),
     at the current configuration.
 
-    ``Kd = k + k_s`` on tree hinges in contact (Eq. 2-4), likewise Cd; one
+    ``Kd = k + k_s e`` on tree hinges past a limit (Eq. 2-4; e the stop's
+    :func:`stop_engagement`), likewise Cd; one
     row of U per cut hinge, its angle Jacobian (its own spring and contact),
     and for PENALTY five per cut hinge, the closure Jacobian of Eq. (5) with
     weights k_M, k_M, k_M, k_N, k_N (c likewise); then one per panel contact
@@ -1336,9 +1372,9 @@ def stiff_terms(P, y, near=None):
     Kd = np.empty(n)
     Cd = np.empty(n)
     for i in range(n):
-        contact = contact_mode(theta[i]) != 1
-        Kd[i] = P.k[i] + (P.k_s if contact else 0.0)
-        Cd[i] = P.c[i] + (P.c_s if contact else 0.0)
+        share = _stop_share(P, theta[i])
+        Kd[i] = P.k[i] + P.k_s * share
+        Cd[i] = P.c[i] + P.c_s * share
     m = P.cut_a.shape[0]
     closure = 6 * m if P.method == PENALTY else m
     pressed = _pressed_points(P, P.contact, R, p, near)
@@ -1355,9 +1391,9 @@ def stiff_terms(P, y, near=None):
         _angular_jacobian(P, S, P.cut_a[j], Jw, 0, -1.0)
         for col in range(n):
             U[j, col] = g[0] * Jw[0, col] + g[1] * Jw[1, col] + g[2] * Jw[2, col]
-        contact = contact_mode(th) != 1
-        kk[j] = P.cut_k[j] + (P.k_s if contact else 0.0)
-        cc[j] = P.cut_c[j] + (P.c_s if contact else 0.0)
+        share = _stop_share(P, th)
+        kk[j] = P.cut_k[j] + P.k_s * share
+        cc[j] = P.cut_c[j] + P.c_s * share
     if P.method == PENALTY:
         _, J, _ = closure_jacobian(P, R, p, w, vo, S, np.zeros((0, 6)))
         for r in range(J.shape[0]):

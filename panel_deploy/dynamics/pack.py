@@ -49,6 +49,8 @@ class Packed(NamedTuple):
     cut_length, cut_k, cut_c : (m,) float
     k_s, c_s : float
         Contact stiffness and damping, Eq. (4).
+    stop_ramp : float
+        rad past a limit over which k_s and c_s come in (0: at once, Eq. 4).
     method : int
         TREE (no cut hinge), PENALTY or EXACT.
     k_M, c_M, k_N, c_N : float
@@ -96,6 +98,7 @@ class Packed(NamedTuple):
     cut_c: np.ndarray
     k_s: float
     c_s: float
+    stop_ramp: float
     method: int
     k_M: float
     c_M: float
@@ -170,6 +173,7 @@ def pack(model: Model) -> Packed:
         cut_c=np.array([h.c_hinge for h in cuts], dtype=float),
         k_s=float(model.k_s),
         c_s=float(model.c_s),
+        stop_ramp=float(model.stop_ramp),
         method=method,
         k_M=float(cl.k_M), c_M=float(cl.c_M), k_N=float(cl.k_N), c_N=float(cl.c_N),
         baumgarte=float(cl.baumgarte),

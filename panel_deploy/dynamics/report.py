@@ -52,7 +52,7 @@ def hinge_states(model: Model, result: SimulationResult, packed=None):
         hinge = model.hinges[h]
         for j in range(s):
             torque[j, col] = hinge_law(theta[j, col], omega[j, col], hinge.k_hinge, hinge.c_hinge,
-                                       model.k_s, model.c_s)[0]
+                                       model.k_s, model.c_s, model.stop_ramp)[0]
     return names, theta, omega, torque
 
 

@@ -278,7 +278,7 @@ def model_record(model) -> dict:
             "stiffness": [float(h.k) for h in model.hinges],           # N m/rad, one spring
             "damping": [float(h.c) for h in model.hinges],             # N m s/rad, one spring
             "springs": [int(h.springs) for h in model.hinges],
-            "k_s": float(model.k_s), "c_s": float(model.c_s),
+            "k_s": float(model.k_s), "c_s": float(model.c_s), "stop_ramp": float(model.stop_ramp),
             "closure": c.method, "k_M": c.k_M, "c_M": c.c_M, "k_N": c.k_N, "c_N": c.c_N,
             "gravity": [float(g) for g in model.gravity],
             "air_density": model.air.density, "drag_coefficient": model.air.drag_coefficient}

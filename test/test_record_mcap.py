@@ -101,6 +101,7 @@ def test_mcap_reader_summary_counts_and_chunks(recorded):
     assert json.loads(meta["model"]["stiffness"]) == [h.k for h in model.hinges]
     assert json.loads(meta["model"]["damping"]) == [h.c for h in model.hinges]
     assert json.loads(meta["model"]["air_density"]) == 0.0  # the paper's model: no air
+    assert json.loads(meta["model"]["stop_ramp"]) == 0.0  # and the paper's joint stops
     assert yaml.safe_load(meta["scene"]["yaml"])["name"] == "paper_4x4"
     assert meta["run"]["version"] and meta["run"]["wall_time"]
     bag = yaml.safe_load(meta["rosbag2"]["serialized_metadata"])

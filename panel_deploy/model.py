@@ -16,6 +16,7 @@ point in body ``i``'s frame is ``point - bodies[i].flat_position``.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, replace
 from typing import Literal
@@ -333,9 +334,12 @@ class Model:
         ------
         ModelError
             If the hinge graph is disconnected, a cut hinge is not on a loop,
-            or the number of cuts does not match the number of loops.
+            the number of cuts does not match the number of loops, or
+            ``stop_ramp`` is negative or not finite.
         """
         nb = len(bodies)
+        if not (math.isfinite(stop_ramp) and stop_ramp >= 0.0):
+            raise ModelError(f"stop_ramp: expected a finite depth >= 0 rad, got {stop_ramp!r}")
         if not 0 <= ground < nb:
             raise ModelError(f"ground: body index {ground} out of range 0..{nb - 1}")
         hinges = list(hinges)

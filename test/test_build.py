@@ -159,3 +159,18 @@ def test_air_parameters_refuse_what_would_feed_energy_in():
         AirParameters(-1.2, 1.17)
     with pytest.raises(ModelError, match=r"^air.drag_coefficient: expected a finite number >= 0"):
         AirParameters(1.2, float("nan"))
+
+
+def test_a_stop_ramp_is_a_depth_from_the_scene_and_never_negative():
+    from panel_deploy.errors import ModelError
+    from panel_deploy.model import Model
+
+    model = build_model(load_scene(PAPER, ["contact.stop_ramp=1e-4"]))
+    assert model.stop_ramp == 1e-4 and build_model(load_scene(PAPER)).stop_ramp == 0.0
+    for bad in (-1e-4, float("nan"), float("inf")):
+        with pytest.raises(ModelError, match=r"^stop_ramp: expected a finite depth >= 0 rad"):
+            Model.build(model.bodies, model.hinges, model.ground, stop_ramp=bad)
+    with pytest.raises(SceneError, match=r"contact.stop_ramp"):
+        load_scene(PAPER, ["contact.stop_ramp=-1e-4"])
+    with pytest.raises(SceneError, match=r"contact.stop_ramp.*milliradians"):
+        load_scene(PAPER, ["contact.stop_ramp=0.1"])

@@ -89,9 +89,10 @@ def stop_engagement(depth, ramp):
     torque jumps there by c_s omega and an explicit step that crosses the
     limit errs by O(h); hinges chattering on their stops in a stowed stack
     then cost most of a run's rejected steps (issue 33, 10 x 10). With the
-    ramp the torque is twice continuously differentiable in theta (the
-    spring's stiffness is k_s times this share), as Hunt and Crossley's
-    impact law removes the jump of a linear dashpot at first touch.
+    ramp the spring's torque is twice continuously differentiable in theta
+    (its stiffness is k_s times this share) and the damper's once, as Hunt
+    and Crossley's impact law removes the jump of a linear dashpot at first
+    touch.
     """
     if depth >= ramp:
         return 1.0

@@ -36,8 +36,15 @@ def damping_line(run, x0) -> np.ndarray:
     population rarely lands in it (3 of 8 seeds found a feasible K in 400
     evaluations); Brent's method, at most 20 evaluations run one after the
     other, hit it with its third (8 of 8 seeds).
+
+    Both ends of the bounds are evaluated first, as one batch: Brent's bounded
+    method never evaluates them, and where every lighter damping collides
+    the score has no slope to lead it there. On 8 x 8 (docs/findings.md 4.8)
+    K_0 deploys only at the heaviest c/k allowed, 2 s, the c/k at which the
+    screening ranked the circuit; Brent's 11 evaluations all collided.
     """
     run.start_phase("c/k")
+    run.batch([np.append(x0[:-1], u) for u in run.problem.x_bounds[-1]])
 
     def f(u):
         run.iterated()

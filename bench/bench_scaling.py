@@ -81,9 +81,9 @@ LOOSER = ((1e-6, 1e-6), (1e-4, 1e-6), (1e-3, 1e-5))
 #: the bodies, and the largest array's wall s per simulated s on this machine.
 GOAL_EXPONENT = 1.5
 GOAL_LARGEST = 2.0
-#: contact.stop_ramp of the larger arrays, rad: a tenth of the smallest stop
-#: overshoot measured on the paper scene (0.2 mrad at k_s = 5000, 0.6 at its
-#: 1000), and 10 um at a 0.1 m panel's edge, the depth of the panel contacts' ramp.
+#: contact.stop_ramp of the larger arrays, rad: a sixth of the smallest stop
+#: overshoot measured on the paper scene at its k_s (0.6 mrad at 1000 N m/rad;
+#: 0.2 at 5000), and 10 um at a 0.1 m panel's edge, the depth of the panel contacts' ramp.
 STOP_RAMP = 1e-4
 
 

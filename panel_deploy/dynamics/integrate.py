@@ -556,6 +556,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
     t, y, bound = t_eval[0], y0, t_end
     solver = cls(fun, t, y, bound, **opts)
     landed = False  # as in dopri5: after a located switch the next step is free
+    locate = locates(P, settings)
     for stop in stops:
         while j <= stop:
             if solver.status == "finished":
@@ -579,7 +580,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
                 status, message = Status.NON_FINITE, f"non-finite state at t = {solver.t:.6g} s"
                 break
             nsteps += 1
-            if locates(P, settings) and not landed:
+            if locate and not landed:
                 frac = first_switch(n, y_old, y_new, solver.t - t_old, settings.atol)
                 if EDGE < frac < 1.0 - EDGE:
                     dt = solver.t - t_old

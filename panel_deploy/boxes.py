@@ -22,6 +22,15 @@ SIGNS = np.array(list(product((-1.0, 1.0), repeat=3)))
 #: extreme: so faces tilted by up to about FEATURE * thickness / length (5 mrad
 #: for the paper's 100 x 100 x 5 mm panels) still press as faces.
 FEATURE = 0.1
+#: Two contact points closer than this (m) are one, and a corner this close to
+#: the other feature's outline is on it: coincident up to rounding (the stowed
+#: stacks' edges), nothing wider. A wider band lets a corner join the contact
+#: while still outside the other feature, at a depth of its own, so the contact
+#: force jumps there: with the FEATURE band (0.25 mm), two side-by-side panels
+#: meeting edge on near flat (8 x 8, issue 33) jumped from 0.2 N to 14 N within
+#: 1e-9 rad, and the integrator stalled on that jump at steps of 1e-8 s. With
+#: the outlines exact, a corner joins where an edge crossing already stood.
+COINCIDENT = 1e-9
 
 
 @njit(cache=True)
@@ -316,7 +325,7 @@ def contact(Ra, ca, ha, Rb, cb, hb, work):
     e2 = (n[1] * e1[2] - n[2] * e1[1], n[2] * e1[0] - n[0] * e1[2], n[0] * e1[1] - n[1] * e1[0])
     _plane(Fa, ma, n, e1, e2, A, angle)
     _plane(Fb, mb, n, e1, e2, B, angle)
-    found = _overlap_corners(A, ma, B, mb, eps, corners2)
+    found = _overlap_corners(A, ma, B, mb, COINCIDENT, corners2)
     count = 0
     for q in range(found):
         x, y = corners2[q, 0], corners2[q, 1]

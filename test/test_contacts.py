@@ -84,6 +84,30 @@ def test_sides_crossing_corners_and_apart():
     assert points_of(np.eye(3), (0, 0, 0), HALF, np.eye(3), (0, 0, 0.006), HALF)[0] == 0
 
 
+def test_panels_meeting_edge_on_push_continuously_as_they_turn():
+    """Two side-by-side panels meeting edge on near flat, as on 8 x 8 (issue 33; the
+    poses rounded from the run): their push is continuous as one turns, the largest
+    change between neighbouring angles shrinking with the spacing as a slope's does.
+    A corner that joined the contact while still a tolerance band outside the other
+    panel's face jumped the push from 0.12 N to 13 N between two angles 1e-5 rad
+    apart, whatever the spacing, and stalled the integrator at steps of 1e-8 s."""
+    Ra = Rotation.from_rotvec([0.01011705, -0.35859632, 0.00735598]).as_matrix()
+    Rb = Rotation.from_rotvec([0.03488547, -0.32875286, 0.01069572]).as_matrix()
+    ca, cb = np.array([-0.05971655, -0.34869838, 0.09653546]), np.array([0.03581818, -0.34817739, 0.12648123])
+    k = 2.5e6  # N/m, a point's share of the scene's k_p
+
+    def push(turn, axis):
+        R = Rotation.from_rotvec(np.multiply(axis, turn)).as_matrix() @ Rb
+        count, _, _, depths = points_of(Ra, ca, HALF, R, cb, HALF)
+        return sum(kernels._contact_law(d, 0.0, k, 0.0)[0] for d in depths)
+
+    for axis in ([0, 1, 0], [1, 0, 0], [0, 0, 1]):
+        steps = [np.abs(np.diff([push(t, axis) for t in np.linspace(-3e-3, 3e-3, m)])).max()
+                 for m in (601, 6001)]
+        assert push(0.0, axis) > 0.1  # pressing (N)
+        assert steps[1] < 0.2 * steps[0], (axis, steps)
+
+
 def paper_model(*sets):
     return build_model(load_scene(PAPER, ["contact.panels=true", *sets]))
 

@@ -22,14 +22,16 @@ SIGNS = np.array(list(product((-1.0, 1.0), repeat=3)))
 #: extreme: so faces tilted by up to about FEATURE * thickness / length (5 mrad
 #: for the paper's 100 x 100 x 5 mm panels) still press as faces.
 FEATURE = 0.1
-#: Two contact points closer than this (m) are one, and a corner this close to
-#: the other feature's outline is on it: coincident up to rounding (the stowed
-#: stacks' edges), nothing wider. A wider band lets a corner join the contact
-#: while still outside the other feature, at a depth of its own, so the contact
-#: force jumps there: with the FEATURE band (0.25 mm), two side-by-side panels
-#: meeting edge on near flat (8 x 8, issue 33) jumped from 0.2 N to 14 N within
-#: 1e-9 rad, and the integrator stalled on that jump at steps of 1e-8 s. With
-#: the outlines exact, a corner joins where an edge crossing already stood.
+#: A corner this close (m) to the other feature's outline is on it: on up to
+#: rounding (the stowed stacks' coincident edges), nothing wider. With the
+#: FEATURE band here a corner joined the contact while still outside the other
+#: panel's face, at a depth of its own, and the push jumped: two side-by-side
+#: panels meeting edge on near flat (8 x 8, issue 33) went from 0.2 N to 14 N
+#: within 1e-9 rad, and the integrator stalled on the jump at steps of 1e-8 s.
+#: With the outline exact a corner joins where an edge crossing already stood.
+#: Points still merge within the FEATURE band: near-coplanar faces have
+#: clusters of corners and crossings microns apart, which must press once, not
+#: two to eight times by turns as the separating axis flips between the faces.
 COINCIDENT = 1e-9
 
 
@@ -238,17 +240,18 @@ def _add_point(out, count, x, y, tol):
 
 
 @njit(cache=True)
-def _overlap_corners(A, ma, B, mb, tol, out):
+def _overlap_corners(A, ma, B, mb, on, merge, out):
     """Corners of the intersection of the convex hulls of A[:ma] and B[:mb]
     (2-d, their first two columns), written to out; returns their number:
-    each one's points inside the other and their edges' crossings. Without
-    any (hulls apart by more than tol), the one point half way between the
-    two hulls' means."""
+    each one's points inside the other (or within ``on`` of its outline) and
+    their edges' crossings, a point within ``merge`` of one found before
+    being that one (m). Without any, the one point half way between the two
+    hulls' means."""
     count = 0
     for P, mp, Q, mq in ((A, ma, B, mb), (B, mb, A, ma)):
         for k in range(mp):
-            if _covers(Q, mq, P[k, 0], P[k, 1], tol):
-                count = _add_point(out, count, P[k, 0], P[k, 1], tol)
+            if _covers(Q, mq, P[k, 0], P[k, 1], on):
+                count = _add_point(out, count, P[k, 0], P[k, 1], merge)
     ea = 0 if ma == 1 else (1 if ma == 2 else ma)
     eb = 0 if mb == 1 else (1 if mb == 2 else mb)
     for i in range(ea):
@@ -263,7 +266,7 @@ def _overlap_corners(A, ma, B, mb, tol, out):
             s = ((qx - px) * wy - (qy - py) * wx) / denom
             u = ((qx - px) * ry - (qy - py) * rx) / denom
             if 0.0 <= s <= 1.0 and 0.0 <= u <= 1.0:
-                count = _add_point(out, count, px + s * rx, py + s * ry, tol)
+                count = _add_point(out, count, px + s * rx, py + s * ry, merge)
     if count == 0:
         out[0, 0] = out[0, 1] = 0.0
         for P, mp in ((A, ma), (B, mb)):
@@ -325,7 +328,7 @@ def contact(Ra, ca, ha, Rb, cb, hb, work):
     e2 = (n[1] * e1[2] - n[2] * e1[1], n[2] * e1[0] - n[0] * e1[2], n[0] * e1[1] - n[1] * e1[0])
     _plane(Fa, ma, n, e1, e2, A, angle)
     _plane(Fb, mb, n, e1, e2, B, angle)
-    found = _overlap_corners(A, ma, B, mb, COINCIDENT, corners2)
+    found = _overlap_corners(A, ma, B, mb, COINCIDENT, eps, corners2)
     count = 0
     for q in range(found):
         x, y = corners2[q, 0], corners2[q, 1]

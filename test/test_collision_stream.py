@@ -304,8 +304,9 @@ def test_throttle_holds_back_and_counts():
 
 
 def test_a_stream_of_a_model_with_panel_contact_checks_its_contact_onsets():
-    """With every pair of the paper scene in contact, r4c1 comes down on r4c4
-    at ~0.09 m/s at 0.284 s and the contact holds them apart (test_contacts):
+    """With every pair of the paper scene in contact, r1c2+r1c3 comes down on
+    r2c4 and r4c1 on r4c4 at ~0.1 m/s at 0.2836 s, and the contact holds them
+    apart (test_contacts):
     joint states alone cannot show it. Fed each interval's onset, beside its
     joint state (a recording) or after it (a live monitor), the stream finds
     the impact the batch check finds; without the onsets, or with some
@@ -317,7 +318,8 @@ def test_a_stream_of_a_model_with_panel_contact_checks_its_contact_onsets():
     result = simulate(model, contact.simulation)
     settings = CollisionSettings.from_scene(contact)
     batch = check_trajectory(model, result, settings)
-    assert batch.first_collision.impact and set(batch.first_collision.names) == {"r4c1", "r4c4"}
+    assert batch.first_collision.impact and set(batch.first_collision.names) in (
+        {"r1c2+r1c3", "r2c4"}, {"r4c1", "r4c4"})
     fields = [onset_fields(model, row) for row in result.contact_onsets]
     beside, after = StreamCheck(model, settings), StreamCheck(model, settings)
     for j, t in enumerate(result.t):

@@ -25,6 +25,9 @@ from panel_deploy.summary import deployment_summary, deployment_text
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "config" / "scenes" / "paper_4x4.yaml"
 HALF = np.array([0.05, 0.05, 0.0025])
+#: The paper scene's first touches with every pair in contact, 10 us apart at 0.2836 s
+#: (test_an_impact_the_contact_absorbs_is_still_a_collision).
+FIRST_TOUCHES = ({"r1c2+r1c3", "r2c4"}, {"r4c1", "r4c4"})
 
 
 def points_of(Ra, ca, ha, Rb, cb, hb):
@@ -106,6 +109,27 @@ def test_panels_meeting_edge_on_push_continuously_as_they_turn():
                  for m in (601, 6001)]
         assert push(0.0, axis) > 0.1  # pressing (N)
         assert steps[1] < 0.2 * steps[0], (axis, steps)
+
+
+def test_near_coplanar_side_faces_press_once_whichever_face_the_axis_takes():
+    """Two neighbours' side faces pressing 0.14 um near flat (8 x 8, issue 33; the
+    poses from the run): four separating axes tie (each face's normal and two edge
+    products), and the one taken flips under 1e-9 rad turns. The corners and
+    crossings microns apart must merge into the same points whichever it is: merged
+    only when coincident to 1 nm, they pressed two to six times by turns, the push
+    jumping 2.5x, and the integrator stalled there (t = 13.85 s at rtol 1e-7)."""
+    Ra = Rotation.from_rotvec([0.01609086462634306, 0.04169775524926448, 0.00015490694295961]).as_matrix()
+    ca = np.array([0.24998563457801365, -0.15002855361305445, -0.01327525164390699])
+    rb = Rotation.from_rotvec([0.01611815453222211, 0.0417050538861146, 0.00015439597318223])
+    cb = np.array([0.24996752415722095, -0.2500155127308808, -0.01488585273195846])
+    rng = np.random.default_rng(1)
+    pushes = []
+    for _ in range(40):
+        Rb = (Rotation.from_rotvec(rng.standard_normal(3) * 1e-9) * rb).as_matrix()
+        _, _, _, depths = points_of(Ra, ca, HALF, Rb, cb, HALF)
+        pushes.append(sum(kernels._contact_law(d, 0.0, 2.5e6, 0.0)[0] for d in depths))
+    assert min(pushes) > 0.0
+    assert max(pushes) / min(pushes) < 1.001
 
 
 def paper_model(*sets):
@@ -235,7 +259,6 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
     P = pack(model)
     n = P.n
     near = kernels.near_pairs(P, P.contact)
-    pressed = {"near": np.zeros(len(P.contact), bool), "all": np.zeros(len(P.contact), bool)}
     listed, spared = [], []
     for j in range(len(result.t)):
         y = np.concatenate([result.theta[j], result.omega[j], [0.0, 0.0]])
@@ -248,10 +271,9 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
             assert np.array_equal(kernels.rhs(P, y, near), kernels.rhs(P, y))
             for got, want in zip(kernels.stiff_terms(P, y, near)[1:], kernels.stiff_terms(P, y)[1:]):
                 assert np.array_equal(got, want)
-        records = {key: np.zeros(9) for key in pressed}
-        kernels.contact_onsets(P, P.contact, y, result.t[j], pressed["near"], records["near"], near)
-        kernels.contact_onsets(P, P.contact, y, result.t[j], pressed["all"], records["all"])
-        assert np.array_equal(pressed["near"], pressed["all"])
+        records = {key: np.zeros(9) for key in ("near", "all")}
+        kernels.contact_onsets(P, P.contact, y, result.t[j], records["near"], near)
+        kernels.contact_onsets(P, P.contact, y, result.t[j], records["all"])
         assert np.array_equal(records["near"], records["all"])
         overlapping = {r for r in range(len(P.contact)) if not kernels._pair_apart(P.contact, r, box)}
         assert overlapping <= set(rows.tolist())
@@ -317,8 +339,11 @@ def test_an_impact_the_contact_absorbs_is_still_a_collision(tmp_path, capsys):
     the tolerance. The integrator's onset makes it a collision, the same pair
     at the same time as the interference without contact, and a trajectory
     file keeps it for ``collide``. At the default impact speed (0.05 m/s) a
-    slower touch comes first: r4c1 comes down on r4c4 at ~0.09 m/s, which
-    without contact is a graze within the tolerance."""
+    slower touch comes first, two at once at 0.2836 s: r1c2+r1c3 on r2c4 at
+    ~0.099 m/s and r4c1 on r4c4 at ~0.094 m/s, 10 us apart, whichever the run's
+    steps meet first. Without contact they graze within the tolerance. Each
+    touches first at one slow point (0.000 and 0.005 m/s), its fast ones a step
+    later: an onset that took a pair's first step alone missed both."""
     from panel_deploy.cli import main
     from panel_deploy.collision import CollisionSettings
     from panel_deploy.trajectory_io import load_trajectory, save_trajectory
@@ -332,10 +357,10 @@ def test_an_impact_the_contact_absorbs_is_still_a_collision(tmp_path, capsys):
         assert runs[on][2].success, runs[on][2].message
     scene, model, result = runs["true"]
     touch = check_trajectory(model, result).first_collision
-    assert touch.impact and set(touch.names) == {"r4c1", "r4c4"} and 0.05 <= touch.normal_speed < 0.1
-    assert touch.t == pytest.approx(0.284, abs=2e-3)
+    assert touch.impact and set(touch.names) in FIRST_TOUCHES and 0.09 <= touch.normal_speed < 0.1
+    assert touch.t == pytest.approx(0.2836, abs=1e-4)
     text = deployment_text(deployment_summary(model, result, check_trajectory(model, result)))
-    assert "between r4c1 and r4c4 (an impact the panel contact absorbed)" in text, text
+    assert f"between {touch.names[0]} and {touch.names[1]} (an impact the panel contact absorbed)" in text, text
     faster = CollisionSettings.from_scene(scene, impact_speed=0.1)
     hit = check_trajectory(model, result, faster).first_collision
     through = check_trajectory(*runs["false"][1:]).first_collision

@@ -37,8 +37,8 @@ def test_run_paper_scene_matches_simulate(compiled_nodes):
 
 
 def test_run_finds_an_impact_the_panel_contact_absorbed(compiled_nodes):
-    """Every pair of the paper scene in contact: r4c1 comes down on r4c4 at
-    0.284 s and the contact holds them within the tolerance, which joint states
+    """Every pair of the paper scene in contact: two pairs come down on each
+    other at 0.2836 s and the contact holds them within the tolerance, which joint states
     cannot show; the monitor checks the dynamics node's contact onsets and
     reports the impact simulate reports."""
     sets = ["contact.panels=true", "simulation.t_end=0.3"]

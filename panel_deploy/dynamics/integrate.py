@@ -226,25 +226,15 @@ SCHEMES = {"dopri5": DOPRI5, "ros34pw2": ROS34PW2}
 ROS34PW2_TERMS = 2
 
 
-def onset_rows(P, y0, s):
-    """The per-sample onset records of a run from y0 with s samples, each
-    empty (no time, speed 0, pair -1), and the pressed flags of y0's contact
-    pairs: a pair pressing at the start has no onset."""
-    onsets = no_onsets(s)
-    pressed = np.zeros(0 if P.contact is None else len(P.contact), dtype=np.bool_)
-    kernels.contact_onsets(P, P.contact, y0, 0.0, pressed, no_onsets(1)[0])
-    return onsets, pressed
-
-
 @njit(cache=True)
-def record_onsets(P, y, t, t_eval, j, pressed, onsets, near):
+def record_onsets(P, y, t, t_eval, j, onsets, near):
     """The contact onsets of the accepted step that ended at (t, y) into the
     row of the sample interval (t_{k-1}, t_k] that holds t, given j, the next
     sample to fill (:func:`kernels.contact_onsets`, with the run's candidate
     list ``near``)."""
     k = j - 1 if t <= t_eval[j - 1] else j
     if k < t_eval.shape[0]:
-        kernels.contact_onsets(P, P.contact, y, t, pressed, onsets[k], near)
+        kernels.contact_onsets(P, P.contact, y, t, onsets[k], near)
 
 
 def _compiled_loop(scheme):
@@ -298,7 +288,7 @@ def _compiled_loop(scheme):
     implicit = scheme == ROS34PW2 or structured
 
     @njit(cache=True)
-    def loop(P, t_eval, Y, onsets, pressed, j, j_stop, carry, counts, rtol, atol, max_step,
+    def loop(P, t_eval, Y, onsets, j, j_stop, carry, counts, rtol, atol, max_step,
              locate, max_steps, gap_limit):
         N = Y.shape[1]
         n = P.n
@@ -389,7 +379,7 @@ def _compiled_loop(scheme):
                     if lands:
                         Y[j] = y
                         j += 1
-                record_onsets(P, y, t, t_eval, j, pressed, onsets, near)
+                record_onsets(P, y, t, t_eval, j, onsets, near)
                 nsteps += 1
                 if gap_limit > 0.0 and max_gap(P, y) > gap_limit:
                     status, code = -1, 3
@@ -484,7 +474,7 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
     s, N = len(t_eval), len(y0)
     Y = np.full((s, N), np.nan)
     Y[0] = y0
-    onsets, pressed = onset_rows(P, y0, s)
+    onsets = no_onsets(s)
     carry = np.zeros(2 + 2 * N)
     carry[0] = t_eval[0]
     carry[2:2 + N] = y0
@@ -496,7 +486,7 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
         if j <= stop:  # else ROS34PW2 filled this block already
             try:
                 j, status, code = loop(
-                    P, t_eval, Y, onsets, pressed, j, int(stop), carry, counts, settings.rtol,
+                    P, t_eval, Y, onsets, j, int(stop), carry, counts, settings.rtol,
                     settings.atol, settings.max_step, locates(P, settings), max_steps, gap_limit)
             except ZeroDivisionError:  # numba's float division by an underflowed zero
                 status, code = -1, -Status.NON_FINITE
@@ -547,7 +537,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
 
     t_end = t_eval[-1]
     out = [y0]
-    onsets, pressed = onset_rows(P, y0, len(t_eval))
+    onsets = no_onsets(len(t_eval))
     j = 1
     lo = done = 0
     nsteps = nlu = nsw = 0
@@ -597,7 +587,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
             while j < len(t_eval) and t_eval[j] <= solver.t:
                 out.append(sol(t_eval[j]))
                 j += 1
-            record_onsets(P, solver.y, solver.t, t_eval, j, pressed, onsets, near)
+            record_onsets(P, solver.y, solver.t, t_eval, j, onsets, near)
             if gap_limit > 0 and max_gap(P, solver.y) > gap_limit:
                 status = Status.GAP_EXCEEDED
                 message = (f"loop-closure gap {max_gap(P, solver.y):.3g} m exceeded the limit "

@@ -1055,35 +1055,35 @@ def panel_contacts(P, contact, R, p, w, vo, f, near):
 
 
 @njit(cache=True)
-def contact_onsets(P, contact, y, t, pressed, record, near=None):
-    """The panel contact pairs that press at y (some point deeper than 0) but did
-    not at the last call, per ``pressed`` (q,) bool, which is updated in place.
+def contact_onsets(P, contact, y, t, record, near=None):
+    """The fastest arriving panel contact at y: over the contact points shallower
+    than CONTACT_RAMP (where the contact's force is not yet in full), the
+    largest approach speed, into ``record`` (9,), laid out as
+    ``result.ONSET_COLUMNS``, at time t (s), if faster than the one already
+    there (record[1]; 0 for none).
 
-    Of those, the fastest onset (the largest approach speed over its points)
-    goes to ``record`` (9,), laid out as ``result.ONSET_COLUMNS``, at time t
-    (s), if faster than the one already there (record[1]; 0 for none).
     Called once per accepted step: a contact stops an impact within a step or
-    two, so the speed at the step that brought the pair into contact is the
-    impact's; the samples would miss it (issue 33: the contact absorbed a
-    4.2 m/s impact between two samples). ``near``: the run's candidate list
-    (:func:`near_pairs`), or None to test every pair.
+    two, so the speed of its shallow points at those steps is the impact's;
+    the samples would miss it (issue 33: the contact absorbed a 4.2 m/s impact
+    between two samples). Every shallow point, not a pair's first: a face
+    coming down may touch first at one slow point, its fast corners a step
+    later (the paper scene's r1c2+r1c3 on r2c4: one point at 0.0000 m/s, the
+    next step another at 0.099 m/s), and a pair resting in light contact can
+    still be struck. ``near``: the run's candidate list (:func:`near_pairs`),
+    or None to test every pair.
     """
     if contact is None:
         return
     n = P.n
     R, p, w, vo, _ = kinematics(P, y[:n], y[n:2 * n])
     work = box_scratch()
-    points = work[-2]
-    before = pressed.copy()
-    pressed[:] = False  # a pair not touching is apart
+    points, depths = work[-2], work[-1]
     for r in _touching(P, contact, R, p, near):
-        was = before[r]
         count, normal = _pair_points(P, contact, r, R, p, work)
-        pressed[r] = count > 0
-        if was or count == 0:
-            continue
         a, b = int(contact[r, 0]), int(contact[r, 1])
         for q in range(count):
+            if depths[q] >= CONTACT_RAMP:
+                continue
             x = (points[q, 0], points[q, 1], points[q, 2])
             speed = _dot(normal, _sub(_point_velocity(w, vo, a, x), _point_velocity(w, vo, b, x)))
             if speed > record[1]:

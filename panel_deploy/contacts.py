@@ -13,10 +13,11 @@ facing features) is :func:`panel_deploy.dynamics.kernels.panel_contacts`.
 The rule that separates pressing from collision: a collision is
 interference deeper than ``collision.tolerance`` (0.1 mm by default, the
 check's own, :mod:`panel_deploy.collision.monitor`), or two panels in
-contact that come to press at ``collision.impact_speed`` (0.05 m/s by
-default) or faster along the normal: an impact, though the contact stopped it
-within the tolerance (the integrator records each contact onset and its
-speed, ``SimulationResult.contact_onsets``). With ``contact.k_p`` = 1e7 N/m
+contact whose points, not yet at the contact's ramp depth (10 um), approach
+at ``collision.impact_speed`` (0.05 m/s by default) or faster along the
+normal: an impact, though the contact stopped it within the tolerance (the
+integrator records the fastest such approach at each of its steps,
+``SimulationResult.contact_onsets``). With ``contact.k_p`` = 1e7 N/m
 a face pressed with 50 N sits 10 um deep, a tenth of the tolerance, and
 0.1 um deeper per newton beyond, so pressing stays far within it; what
 goes deeper slowly is a press the contact could not hold (a jam against

@@ -81,9 +81,10 @@ class SimulationResult:
         Angles of the m cut hinges, rad (they are not coordinates: computed
         from the body poses; empty second axis for a tree).
     contact_onsets : (s, 9) ndarray (columns :data:`ONSET_COLUMNS`)
-        Row j: the fastest panel contact onset in (t_{j-1}, t_j] (a pair of
-        ``model.contact_pairs`` that came to press, found at the end of the
-        integrator's step): its time (s), approach speed along the normal
+        Row j: the fastest panel contact onset in (t_{j-1}, t_j] (the fastest
+        approach of a contact point of ``model.contact_pairs`` not yet 10 um
+        deep, :func:`~panel_deploy.dynamics.kernels.contact_onsets`, at the end
+        of each of the integrator's steps): its time (s), approach speed along the normal
         (m/s), the pair's index in ``model.contact_pairs``, the contact point
         (m) and the normal (first body towards the second), ground frame;
         time nan, speed 0 and index -1 where none (every row without panel

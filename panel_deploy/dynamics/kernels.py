@@ -1067,8 +1067,9 @@ def contact_onsets(P, contact, y, t, record, near=None):
     the samples would miss it (issue 33: the contact absorbed a 4.2 m/s impact
     between two samples). Every shallow point, not a pair's first: a face
     coming down may touch first at one slow point, its fast corners a step
-    later (the paper scene's r1c2+r1c3 on r2c4: one point at 0.0000 m/s, the
-    next step another at 0.099 m/s), and a pair resting in light contact can
+    later (the paper scene's r1c2+r1c3 on r2c4, 50 us samples: one point at
+    0.000 m/s, the next sample another at 0.097 m/s; r4c1 on r4c4 was missed so,
+    one point pressing a step before its four), and a pair resting in light contact can
     still be struck. ``near``: the run's candidate list (:func:`near_pairs`),
     or None to test every pair.
     """

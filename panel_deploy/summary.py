@@ -40,8 +40,8 @@ def deployment_text(s: dict) -> str:
                 f"; smallest closure singular value {s['min_closure_sigma']:.2e}")]
     choice = s.get("circuit_choice")
     if choice:
-        lines.append(f"circuit {choice['index']}: fold.circuit: auto, chosen by ranking (the "
-                     f"best of {len(choice['screened'])} screened: {choice['outcome']})")
+        from .fold.ranking import choice_text
+        lines.append(f"circuit {choice['index']}: {choice_text(choice)}")
     lines.append("hinges released at (s): "
                  + ", ".join(f"{n} {fmt(t)}" for n, t in s["release_times"].items()))
     if s["locked_hinges"]:

@@ -158,6 +158,26 @@ def test_auto_resolves_to_the_top_ranked_circuit_once_per_scene(soft, ranked, mo
     assert resolve_circuit(chosen) is chosen  # a circuit index is left alone
 
 
+def test_next_ranked_moves_down_the_ranking_saying_why(soft, ranked):
+    first = resolve_circuit(soft)
+    order = [s.index for s in ranked.table if s.outcome < ranking.FAILED]
+    assert [e["index"] for e in first.fold.circuit_choice["ranked"]] == order
+    second = ranking.next_ranked(first, "re-check: collision")
+    choice = second.fold.circuit_choice
+    assert second.fold.circuit == order[1] == choice["index"] == second.data["fold"]["circuit"]
+    assert choice["rank"] == 2 and choice["outcome"] == ranked.table[1].text()
+    assert choice["passed_over"] == [{"index": order[0], "why": "re-check: collision"}]
+    assert scene_design(second).circuit == circuit_by_index(4, 4, order[1])
+    text = ranking.choice_text(choice)
+    assert "ranked 2" in text and f"circuit {order[0]} passed over: re-check: collision" in text
+    last = second
+    for _ in order[2:]:
+        last = ranking.next_ranked(last, "no design")
+    assert last.fold.circuit == order[-1] and len(last.fold.circuit_choice["passed_over"]) == len(order) - 1
+    assert ranking.next_ranked(last, "no design") is None  # the ranking ends
+    assert ranking.next_ranked(load_scene(PAPER), "no design") is None  # not chosen by one
+
+
 def test_the_array_model_publishes_the_circuit_auto_chose(soft, ranked, tmp_path):
     path = tmp_path / "soft.yaml"
     path.write_text(yaml.safe_dump(soft.data))
@@ -256,3 +276,57 @@ def test_cli_fold_rank_screens_to_the_end_time_asked(capsys):
 def test_cli_fold_rank_flags_are_checked(capsys, argv, expected):
     code, out, err = run(capsys, *argv)
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1 and expected in err
+
+
+def test_optimise_tries_the_next_ranked_circuits_while_no_design_passes(soft, monkeypatch, capsys):
+    from types import SimpleNamespace
+
+    from panel_deploy.cli import optimise as command
+
+    chosen = resolve_circuit(soft)
+    order = [e["index"] for e in chosen.fold.circuit_choice["ranked"]]
+    tried = []
+
+    def stand_in(args, scene):  # circuit order[1] gives the design
+        tried.append(scene.fold.circuit)
+        return (0, "") if scene.fold.circuit == order[1] else (1, "re-check: collision")
+
+    monkeypatch.setattr(command, "optimise_scene", stand_in)
+    code, last = command.optimise_ranked(SimpleNamespace(), chosen)
+    assert code == 0 and tried == order[:2] and last.fold.circuit == order[1]
+    assert last.fold.circuit_choice["passed_over"] == [{"index": order[0],
+                                                        "why": "re-check: collision"}]
+    assert (f"circuit {order[0]} gave no design (re-check: collision); optimising circuit "
+            f"{order[1]}, ranked 2") in capsys.readouterr().err
+    # optimisation.circuits bounds the tries; a circuit the scene names is the only one
+    tried.clear()
+    one = replace(chosen, optimisation=replace(chosen.optimisation, circuits=1))
+    assert command.optimise_ranked(SimpleNamespace(), one)[0] == 1 and tried == order[:1]
+    tried.clear()
+    named = load_scene(PAPER, ["fold.circuit=2", "fold.ground=null"])
+    assert command.optimise_ranked(SimpleNamespace(), named) == (1, named) and tried == [2]
+
+
+def test_a_result_of_auto_deploys_on_its_own_circuit(soft, monkeypatch, tmp_path):
+    from panel_deploy.cli.args import result_scene
+    from panel_deploy.errors import OptimisationError
+
+    on_one = load_scene(PAPER, ["fold.circuit=1", "fold.ground=null"])
+    result = tmp_path / "k.yaml"
+    result.write_text(yaml.safe_dump({
+        "format": "panel_deploy.stiffness/1", "circuit": 1,
+        "hinges": {h.name: {"k": 0.05} for h in build_model(on_one).hinges}}))
+    monkeypatch.setattr(ranking, "rank_circuits", lambda *a, **k: pytest.fail("ranked"))
+    scene = result_scene(soft, result)
+    assert scene.fold.circuit == 1 and scene.data["fold"]["circuit"] == 1
+    assert scene.fold.circuit_choice == {"index": 1, "by": "stiffness file", "file": str(result)}
+    assert result_scene(on_one, result) is on_one  # a circuit the scene names stays
+    # another circuit's model: the error says which circuit the file is for
+    with pytest.raises(OptimisationError, match="the file is for fold.circuit 1, "
+                                                "--set fold.circuit=1 builds it"):
+        from panel_deploy.pipeline import scene_model
+        scene_model(load_scene(PAPER, ["fold.circuit=0", "fold.ground=null"]), result)
+    result.write_text(result.read_text().replace("circuit: 1", "circuit: 99"))
+    with pytest.raises(OptimisationError, match=r"^stiffness file '.*k.yaml': circuit: circuit "
+                                                r"index 99 out of range"):
+        result_scene(soft, result)

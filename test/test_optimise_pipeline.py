@@ -173,7 +173,7 @@ def test_optimise_command_succeeds_only_if_the_re_check_agrees(monkeypatch, caps
     monkeypatch.setattr(command, "build_model", lambda scene: chain_model(2, beta=BETA))
     s = short_scene(0.3, samples=31, max_evaluations=1)
     args = SimpleNamespace(quiet=True, json=True, workers=1)
-    assert command.optimise_scene(args, s) == 0
+    assert command.optimise_scene(args, s) == (0, "")
     data = json.loads(capsys.readouterr().out)
     assert data["success"] and data["verification"]["reached_flat"]
 
@@ -182,7 +182,7 @@ def test_optimise_command_succeeds_only_if_the_re_check_agrees(monkeypatch, caps
 
     monkeypatch.setattr(command, "verify", short_recheck)
     args.quiet = False
-    assert command.optimise_scene(args, s) == 1
+    assert command.optimise_scene(args, s)[0] == 1
     captured = capsys.readouterr()
     data = json.loads(captured.out)
     assert data["success"] and not data["verification"]["reached_flat"]
@@ -206,7 +206,7 @@ def test_optimise_command_re_checks_the_damping_the_search_chose(monkeypatch, ca
                             functools.partial(getattr(command, name), evaluation=damped_outcome))
     s = scene(method="global", max_evaluations=200, seed=2, damping_ratio_bounds=[0.01, 0.5])
     args = SimpleNamespace(quiet=True, json=True, workers=1, perturb=5, perturb_tol=0.01)
-    assert command.optimise_scene(args, s) == 0
+    assert command.optimise_scene(args, s) == (0, "")
     data = json.loads(capsys.readouterr().out)
     assert DAMPED_BAND[0] <= data["damping_ratio"] <= DAMPED_BAND[1]
     assert data["damping_ratio_bounds"] == [0.01, 0.5]
@@ -234,7 +234,7 @@ def test_optimise_command_without_a_feasible_k_says_what_to_try(monkeypatch, cap
                             functools.partial(getattr(command, name), evaluation=damped_outcome))
     out = tmp_path / "k.yaml"
     args = SimpleNamespace(quiet=False, workers=1, out=str(out), springs=[0.05, 0.1])
-    assert command.optimise_scene(args, scene(max_evaluations=10)) == 1
+    assert command.optimise_scene(args, scene(max_evaluations=10))[0] == 1
     captured = capsys.readouterr()
     err = captured.err
     assert out.exists()

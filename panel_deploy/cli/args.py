@@ -91,6 +91,38 @@ def scene_of(args, name_attr: str = "scene", resolve: bool = True, parallel: boo
     return chosen_circuit(scene)
 
 
+def result_scene(scene, result_file):
+    """``scene`` to deploy the result file ``result_file`` (``--stiffness``)
+    on: with ``fold.circuit: auto``, the circuit the file was optimised on if
+    it names one (``fold.circuit_choice`` says so), rather than a new ranking
+    whose first circuit may be another; else as :func:`chosen_circuit`.
+
+    Raises
+    ------
+    OptimisationError
+        The file cannot be read, or its ``circuit`` is not one of the scene's array.
+    """
+    from ..build import design_of
+    from ..errors import OptimisationError
+    from ..optimise.io import result_circuit
+    from ..scene import apply_overrides, scene_from_dict
+    from ..scene_text import yaml_value
+
+    circuit = result_circuit(result_file) if scene.fold.circuit == "auto" else None
+    if circuit is None:
+        return chosen_circuit(scene)
+    choice = {"index": circuit, "by": "stiffness file", "file": str(result_file)}
+    try:
+        scene = scene_from_dict(apply_overrides(scene.data, [
+            f"fold.circuit={yaml_value(circuit)}", f"fold.circuit_choice={yaml_value(choice)}"]),
+            source=scene.source)
+        design_of(scene)  # checked here, so that the error names the file
+        return scene
+    except SceneError as e:
+        raise OptimisationError(f"stiffness file {str(result_file)!r}: circuit: "
+                                f"{e.reason}") from None
+
+
 def chosen_circuit(scene, workers: int = 1, dask_address: str | None = None):
     """``scene`` with ``fold.circuit: auto`` resolved to the best-ranked circuit
     (:func:`panel_deploy.fold.ranking.resolve_circuit`: a screening run of

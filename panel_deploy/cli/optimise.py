@@ -42,7 +42,7 @@ def optimise_command(args) -> int:
     if args.record:
         from ..record.deployment import check_recordable, record_optimum
         check_recordable(scene)
-    code = optimise_scene(args, scene)
+    code, scene = optimise_ranked(args, scene)
     if args.record and code != 130:
         record_optimum(args.record, scene, args.out)
         print(f"recorded the deployment of {args.out} -> {args.record}", file=sys.stderr)
@@ -54,8 +54,31 @@ def _option(args, name, default=None):
     return getattr(args, name, default)
 
 
-def optimise_scene(args, scene) -> int:
-    """:func:`optimise_command` on a loaded ``scene``, without the recording."""
+def optimise_ranked(args, scene) -> tuple:
+    """:func:`optimise_scene` on ``scene``; when ``fold.circuit: auto`` chose
+    its circuit, then on the next-ranked circuits in turn while no design
+    passes (exit code 1), up to ``optimisation.circuits`` circuits in all.
+    Returns ``(exit code, the scene of the last circuit optimised)``."""
+    from ..fold.ranking import next_ranked
+
+    for tried in range(1, scene.optimisation.circuits + 1):
+        code, why = optimise_scene(args, scene)
+        following = next_ranked(scene, why) if code == 1 and tried < scene.optimisation.circuits \
+            else None
+        if following is None:
+            return code, scene
+        print(f"panel-deploy: note: circuit {scene.fold.circuit} gave no design ({why}); "
+              f"optimising circuit {following.fold.circuit}, ranked "
+              f"{following.fold.circuit_choice['rank']} ({following.fold.circuit_choice['outcome']})",
+              file=sys.stderr)
+        scene = following
+    return code, scene
+
+
+def optimise_scene(args, scene) -> tuple:
+    """:func:`optimise_command` on a loaded ``scene``, without the recording and
+    the next-ranked circuits: ``(exit code, why no design)``, the reason empty
+    unless the exit code is 1."""
     arg = partial(_option, args)
 
     model = build_model(scene)
@@ -71,9 +94,12 @@ def optimise_scene(args, scene) -> int:
         result = optimise(model, scene, dask_address=arg("dask"),
                           progress=None if quiet else report,
                           k0=load_stiffness(arg("start"), model) if arg("start") else None)
-    extra = {}
+    circuit = scene.fold.circuit
+    extra = {"circuit": circuit if isinstance(circuit, int) else [list(c) for c in circuit]}
+    if scene.fold.circuit_choice is not None:
+        extra["circuit_choice"] = scene.fold.circuit_choice
     if result.status == 3:
-        return save_interrupted(result, arg("out"), scene.name, extra)
+        return save_interrupted(result, arg("out"), scene.name, extra), ""
     try:
         return check_and_write(args, model, scene, result, extra)
     except KeyboardInterrupt:
@@ -81,7 +107,7 @@ def optimise_scene(args, scene) -> int:
         # with the checks done so far, as an interrupted result.
         result = replace(result, status=3, message=(
             f"interrupted during the checks after the search ({result.message})"))
-        return save_interrupted(result, arg("out"), scene.name, extra)
+        return save_interrupted(result, arg("out"), scene.name, extra), ""
 
 
 def save_interrupted(result, out, scene_name, extra) -> int:
@@ -98,7 +124,8 @@ def save_interrupted(result, out, scene_name, extra) -> int:
 def check_and_write(args, model, scene, result, extra) -> int:
     """The re-check, ``--springs`` and ``--perturb`` of a finished search's
     ``result``; writes the result with them (into ``extra``) and returns the
-    exit code of :func:`optimise_command`."""
+    exit code of :func:`optimise_command` and, for exit code 1, why the
+    result is no design (the search's message or the re-check's verdict)."""
     arg = partial(_option, args)
 
     quiet = arg("quiet", False)
@@ -151,7 +178,9 @@ def check_and_write(args, model, scene, result, extra) -> int:
     if result.status == 2 and not quiet:
         print(next_steps(result, out), file=sys.stderr)
     # A K the search found feasible counts only if the independent re-check agrees.
-    return 0 if written["success"] and check.outcome.feasible else 1
+    if not written["success"]:
+        return 1, written["message"]
+    return (0, "") if check.outcome.feasible else (1, lines[0])
 
 
 def verdict(label, check) -> str:

@@ -7,14 +7,16 @@ import json
 from ..pipeline import scene_model, simulate_scene
 from ..summary import deployment_summary, deployment_text
 from ..validate import first_non_finite_value
-from .args import scene_of
+from .args import result_scene, scene_of
 
 
 def simulate_command(args) -> int:
     """Print the deployment's summary (``--json``: one object); write ``--out``
     (trajectory) and ``--record`` (MCAP). Exit 0 when the run succeeded, 1 if
     not (or if a number in the summary came out non-finite)."""
-    scene = scene_of(args)
+    scene = scene_of(args, resolve=not args.stiffness)
+    if args.stiffness:
+        scene = result_scene(scene, args.stiffness)
     if args.record:
         from ..record.deployment import check_recordable, record_deployment
         check_recordable(scene)

@@ -410,6 +410,8 @@ def choose_circuit(scene, progress: Callable[[Screening], None] | None = None,
             del _CHOSEN[next(iter(_CHOSEN))]
         _CHOSEN[key] = {"index": best.index, "by": "ranking", "outcome": best.text(),
                         "screened": list(ranking.screened), "examined": ranking.examined,
+                        "ranked": [{"index": s.index, "outcome": s.text()}
+                                   for s in ranking.table if s.outcome < FAILED],
                         "screening": ranking.settings.to_dict()}
     return dict(_CHOSEN[key])
 
@@ -428,7 +430,45 @@ def resolve_circuit(scene, progress: Callable[[Screening], None] | None = None,
     """
     if scene.fold.circuit != "auto":
         return scene
-    choice = choose_circuit(scene, progress, task_map)
+    return _with_choice(scene, choose_circuit(scene, progress, task_map))
+
+
+def next_ranked(scene, why: str):
+    """The circuit after ``scene``'s in the ranking that chose it: ``scene``
+    (resolved from ``fold.circuit: auto`` by :func:`resolve_circuit`) on the
+    next circuit of ``circuit_choice['ranked']`` (the screened circuits whose
+    simulation did not fail, best first), its ``circuit_choice`` saying
+    ``why`` the one before was passed over; None when the ranking has no
+    further circuit, or ``scene``'s circuit was not chosen by a ranking."""
+    choice = scene.fold.circuit_choice
+    ranked = [e["index"] for e in (choice or {}).get("ranked", ())]
+    if not choice or choice.get("by") != "ranking" or scene.fold.circuit not in ranked:
+        return None
+    at = ranked.index(scene.fold.circuit) + 1
+    if at == len(ranked):
+        return None
+    passed = [*choice.get("passed_over", ()), {"index": scene.fold.circuit, "why": why}]
+    return _with_choice(scene, {**choice, "index": ranked[at], "rank": at + 1,
+                                "outcome": choice["ranked"][at]["outcome"],
+                                "passed_over": passed})
+
+
+def choice_text(choice: dict) -> str:
+    """How ``fold.circuit: auto`` chose a circuit (a ``fold.circuit_choice``
+    mapping: :func:`resolve_circuit`, :func:`next_ranked`, or a stiffness
+    file's circuit) in one line."""
+    if choice.get("by") != "ranking":
+        return f"fold.circuit: auto, the circuit of {choice.get('by')} {choice.get('file', '')}".rstrip()
+    rank = choice.get("rank", 1)
+    passed = "".join(f"; circuit {p['index']} passed over: {p['why']}"
+                     for p in choice.get("passed_over", ()))
+    return (f"fold.circuit: auto, chosen by ranking ({'the best' if rank == 1 else f'ranked {rank}'}"
+            f" of {len(choice.get('screened', ()))} screened: {choice.get('outcome')}{passed})")
+
+
+def _with_choice(scene, choice: dict):
+    """``scene`` on circuit ``choice['index']``, ``fold.circuit_choice`` =
+    ``choice`` in its sections and in the mapping it stores."""
     data = scene.data
     if data is not None:
         data = {**data, "fold": {**(data.get("fold") or {}), "circuit": choice["index"],

@@ -21,6 +21,8 @@ Format (``format: panel_deploy.stiffness/1``)::
     initial: {f, v, d, collision, ...}   # the same for K_0
     success, status, message, nfev, nit, nstarts, method, wall_time
     first_feasible: {nfev, wall_time}    # when the first feasible K came back, or null
+    circuit: 11                  # fold.circuit optimised (an index or the cells in order)
+    circuit_choice: {...}        # with fold.circuit: auto, how the ranking chose it
 
 :func:`load_stiffness` reads only ``hinges`` (and accepts a plain
 ``{hinge: k}`` mapping there), so hand-written files work too.
@@ -43,7 +45,8 @@ RESULT_KEYS = ("format", "scene", "hinges", "groups", "bounds", "damping_ratio",
                "damping_ratio_bounds", "damping_window", "f", "v", "d", "collision",
                "flat_residual", "reached_flat", "simulated", "message", "t_stop", "initial",
                "success", "status", "nfev", "nit", "nstarts", "method", "wall_time",
-               "first_feasible", "verification", "manufacture", "tolerance")
+               "first_feasible", "verification", "manufacture", "tolerance", "circuit",
+               "circuit_choice")
 
 
 def result_to_dict(result, scene_name: str = "", extra: dict | None = None) -> dict:
@@ -139,36 +142,20 @@ def load_hinges(path, model) -> tuple:
     k as :func:`load_stiffness`, c as :func:`load_damping` (None if the file
     gives none); a bare number for a hinge is its k.
     """
-    from ..errors import PanelDeployError
-    from ..validate import load_yaml, read_text, yaml_problem
-
-    where = f"stiffness file {str(path)!r}"
-    try:
-        data = load_yaml(read_text(path, "stiffness file"))
-    except PanelDeployError as e:
-        raise OptimisationError(f"{where}: cannot read ({str(e).rpartition(': ')[2]})") from None
-    except yaml.YAMLError as e:
-        raise OptimisationError(f"{where}: not valid YAML ({yaml_problem(e)})") from None
-    if not isinstance(data, dict) or not isinstance(data.get("hinges"), dict):
-        raise OptimisationError(f"{where}: expected a mapping with a 'hinges' mapping "
-                                f"(hinge name -> k), as written by panel-deploy optimise")
-    if "format" in data and data["format"] != FORMAT:
-        raise OptimisationError(f"{where}: format: expected {FORMAT}, got {shown(data['format'])}")
-    # A hand-written file (no format) gets no unknown key past: a misspelt key
-    # would be ignored silently. Files save_result wrote may carry extra sections.
-    unknown = [str(key) for key in data if key not in RESULT_KEYS] if "format" not in data else []
-    if unknown:
-        raise OptimisationError(f"{where}: {unknown[0]}: unknown key (a result file has "
-                                f"{', '.join(RESULT_KEYS)})")
+    data, where = _read_result(path)
     given = data["hinges"]
     names = [h.name for h in model.hinges]
     unknown = sorted(set(map(str, given)) - set(names))
     missing = [n for n in names if n not in given]
+    # a result of fold.circuit: auto names the circuit it is for, which a scene
+    # with another circuit (or auto ranking another first) does not build
+    circuit = (f"; the file is for fold.circuit {data['circuit']}, "
+               f"--set fold.circuit={data['circuit']} builds it") if "circuit" in data else ""
     if unknown:
         raise OptimisationError(f"{where}: hinges.{unknown[0]}: no such hinge in this model "
-                                f"(hinges are: {', '.join(names)})")
+                                f"(hinges are: {', '.join(names)}{circuit})")
     if missing:
-        raise OptimisationError(f"{where}: hinges: missing {', '.join(missing)}")
+        raise OptimisationError(f"{where}: hinges: missing {', '.join(missing)}{circuit}")
     entries = [given[name] if isinstance(given[name], dict) else {"k": given[name]}
                for name in names]
     for name, entry in zip(names, entries):
@@ -190,3 +177,42 @@ def load_hinges(path, model) -> tuple:
 
     k = values("k", "N m/rad")
     return k, values("c", "N m s/rad") if any("c" in e for e in entries) else None
+
+
+def result_circuit(path):
+    """The ``circuit`` a result file says it was optimised on (an index, or the
+    cells in order), or None if it does not say.
+
+    Raises
+    ------
+    OptimisationError
+        As :func:`load_hinges`, for a file it cannot read.
+    """
+    return _read_result(path)[0].get("circuit")
+
+
+def _read_result(path) -> tuple:
+    """``(mapping, where)`` of a result file whose top level is valid, ``where``
+    naming it for messages."""
+    from ..errors import PanelDeployError
+    from ..validate import load_yaml, read_text, yaml_problem
+
+    where = f"stiffness file {str(path)!r}"
+    try:
+        data = load_yaml(read_text(path, "stiffness file"))
+    except PanelDeployError as e:
+        raise OptimisationError(f"{where}: cannot read ({str(e).rpartition(': ')[2]})") from None
+    except yaml.YAMLError as e:
+        raise OptimisationError(f"{where}: not valid YAML ({yaml_problem(e)})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("hinges"), dict):
+        raise OptimisationError(f"{where}: expected a mapping with a 'hinges' mapping "
+                                f"(hinge name -> k), as written by panel-deploy optimise")
+    if "format" in data and data["format"] != FORMAT:
+        raise OptimisationError(f"{where}: format: expected {FORMAT}, got {shown(data['format'])}")
+    # A hand-written file (no format) gets no unknown key past: a misspelt key
+    # would be ignored silently. Files save_result wrote may carry extra sections.
+    unknown = [str(key) for key in data if key not in RESULT_KEYS] if "format" not in data else []
+    if unknown:
+        raise OptimisationError(f"{where}: {unknown[0]}: unknown key (a result file has "
+                                f"{', '.join(RESULT_KEYS)})")
+    return data, where

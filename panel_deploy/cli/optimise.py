@@ -195,7 +195,7 @@ def verdict(label, check) -> str:
                        f"approach speed {o.v:.3f} m/s")
     if not o.reached_flat:
         return head + f"collision-free but never flat (closest {o.flat_residual:.3f} rad)"
-    return head + f"collision-free and flat, d = {o.d * 1e3:.2f} mm"
+    return head + f"collision-free and flat, d = {o.d * 1e3:.3g} mm"
 
 
 def next_steps(result, out) -> str:

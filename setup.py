@@ -79,7 +79,7 @@ setup(
     extras_require={
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
         "test": ["pytest>=7", "mujoco>=3.0", "dask[distributed]>=2024.1", "yourdfpy>=0.0.56",
-                 "mcap-ros2-support>=0.5", "hypothesis>=6.100"],
+                 "mcap-ros2-support>=0.5", "hypothesis>=6.100", "pytest-xdist>=3.5"],
     },
     cmdclass={"build_py": BuildWithKernels},
     zip_safe=False,  # numba loads the compiled kernels from files next to the sources

@@ -232,6 +232,8 @@ def _frames(*modules):
     # rosbags' serialiser code, exec'd from a string while the recording starts
     (("tmpmod:<string>", "rosbags.serde.utils", "panel_deploy.record"), True),
     (("__main__:<string>",), False),  # python -c: the whole program is such a string
+    # a pytest-xdist worker: python -c execs execnet's bootstrap in __main__
+    (("test_x", "xdist.remote", "__main__:<string>", "__main__:<string>"), False),
 ])
 def test_interrupts_are_deferred_under_numba_llvmlite_an_import_or_exec(stack, deferred):
     from panel_deploy.cli import deferring

@@ -248,12 +248,16 @@ def deferring(frame) -> bool:
     """Whether ``frame`` or one of its callers is code of :data:`DEFERRED_IN`,
     or a string run by ``exec``: CPython 3.11 marks a KeyboardInterrupt raised
     in one (rosbags compiles its serialisers so) as unhandled even when caught,
-    and the process then ends killed by SIGINT instead of with its exit code."""
+    and the process then ends killed by SIGINT instead of with its exit code.
+    Strings run in ``__main__`` are the program itself, not such code:
+    ``python -c``'s, and what it execs there (execnet's bootstrap, under
+    which every test of a pytest-xdist worker runs)."""
     while frame is not None:
         code = frame.f_code
-        if frame.f_globals.get("__name__", "").partition(".")[0] in DEFERRED_IN or (
+        name = frame.f_globals.get("__name__", "")
+        if name.partition(".")[0] in DEFERRED_IN or (
                 code.co_filename == "<string>" and code.co_name == "<module>"
-                and frame.f_back is not None):  # not ``python -c``'s own program
+                and name != "__main__"):
             return True
         frame = frame.f_back
     return False

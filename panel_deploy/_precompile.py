@@ -24,13 +24,22 @@ from pathlib import Path
 from ._numba_cache import COMPILED_MARKER
 
 
+#: The paper's panels as a 5 x 6 array (its first packing circuit): above
+#: ``articulated.MIN_N`` coordinates, where the stiff runs take the O(n) loop.
+LARGER = ["--set", "array.rows=5", "--set", "array.cols=6", "--set", "fold.circuit=3",
+          "--set", "fold.ground=null", "--t-end", "0.01"]
+CONTACT = ["--set", "contact.panels=true"]
+
+
 def jobs(scene: str, folder: Path) -> list[list[str]]:
     """The command lines whose kernels are compiled: every main job that runs
-    kernels, both compiled integrators and the scipy path; and the main job
-    and its check in air, whose packed model numba types apart (its drag
-    field is an array, not None)."""
+    kernels, both compiled integrators and the scipy path; the main job and
+    its check in air and with panel contact, whose packed models numba types
+    apart (their drag and contact fields are arrays, not None); and the
+    larger arrays' loops (the O(n) Rosenbrock loop, with and without contact,
+    and DOPRI5 with contact on the exact closure)."""
     trajectory, recording = str(folder / "run.npz"), str(folder / "run.mcap")
-    in_air = str(folder / "air.npz")
+    in_air, in_contact = str(folder / "air.npz"), str(folder / "contact.npz")
     return [
         ["simulate", scene, "--out", trajectory, "--record", recording],
         ["collide", trajectory],
@@ -40,6 +49,11 @@ def jobs(scene: str, folder: Path) -> list[list[str]]:
         ["simulate", scene, "--method", "RK45", "--t-end", "0.01"],
         ["simulate", scene, "--set", "air.density=1.2", "--t-end", "0.05", "--out", in_air],
         ["collide", in_air],
+        ["simulate", scene, *CONTACT, "--t-end", "0.05", "--out", in_contact],
+        ["collide", in_contact],
+        ["simulate", scene, *LARGER],
+        ["simulate", scene, *LARGER, *CONTACT],
+        ["simulate", scene, *LARGER, *CONTACT, "--closure", "exact"],
     ]
 
 

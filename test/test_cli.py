@@ -154,8 +154,10 @@ def test_sigterm_during_optimise_saves_the_best_so_far(tmp_path):
     from panel_deploy.scene import load_scene
 
     out = tmp_path / "best.yaml"
+    # cwd: not the checkout, which ``-m`` would import instead of the package under
+    # test (its kernels then compile first, and the first line is the notice)
     proc = subprocess.Popen([sys.executable, "-m", "panel_deploy.cli", "optimise", PAPER,
-                             "--workers", "1", "--out", str(out)],
+                             "--workers", "1", "--out", str(out)], cwd=tmp_path,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         first = proc.stderr.readline()
@@ -189,7 +191,8 @@ def test_sigterm_as_timeout_sends_it_keeps_the_feasible_k_found(tmp_path):
         proc = subprocess.Popen(
             [sys.executable, "-m", "panel_deploy.cli", "optimise", PAPER, "--workers", "2",
              "--set", "optimisation.damping_ratio_bounds=[0.043,0.3]", "--out", str(out)],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+            cwd=tmp_path)  # the package under test, not the checkout (above)
         try:
             line = ""
             while "flat yes" not in line or "collision no" not in line:

@@ -142,12 +142,12 @@ def _listening(port):
     return found
 
 
-def test_serve_binds_loopback_only_and_stops_on_sigint(recording):
+def test_serve_binds_loopback_only_and_stops_on_sigint(recording, tmp_path):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     proc = subprocess.Popen([sys.executable, "-m", "panel_deploy.cli", "replay", str(recording),
-                             "--serve", "--port", str(port)],
+                             "--serve", "--port", str(port)], cwd=tmp_path,  # not the checkout
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = proc.stdout.readline()

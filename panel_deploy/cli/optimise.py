@@ -21,7 +21,8 @@ def optimise_command(args) -> int:
     ``--method``, ``--max-evaluations``, ``--workers`` applied); exit code 0 if
     it found a feasible K (collision-free, reaching flat) and the independent
     re-check of that K agrees, else 1; 130 when interrupted (the best K so far
-    is still written).
+    is still written). With ``fold.circuit: auto``, a circuit that gives no
+    design is followed by the next-ranked ones (:func:`optimise_ranked`).
 
     - ``out`` [--out RESULT.yaml]: result file; without it the YAML goes to stdout.
     - ``record`` [--record FILE.mcap]: then record the deployment of the result.
@@ -121,7 +122,7 @@ def save_interrupted(result, out, scene_name, extra) -> int:
     return 130
 
 
-def check_and_write(args, model, scene, result, extra) -> int:
+def check_and_write(args, model, scene, result, extra) -> tuple:
     """The re-check, ``--springs`` and ``--perturb`` of a finished search's
     ``result``; writes the result with them (into ``extra``) and returns the
     exit code of :func:`optimise_command` and, for exit code 1, why the

@@ -62,10 +62,9 @@ def optimise_ranked(args, scene) -> tuple:
     Returns ``(exit code, the scene of the last circuit optimised)``."""
     from ..fold.ranking import next_ranked
 
-    for tried in range(1, scene.optimisation.circuits + 1):
+    for _ in range(scene.optimisation.circuits - 1):
         code, why = optimise_scene(args, scene)
-        following = next_ranked(scene, why) if code == 1 and tried < scene.optimisation.circuits \
-            else None
+        following = next_ranked(scene, why) if code == 1 else None
         if following is None:
             return code, scene
         print(f"panel-deploy: note: circuit {scene.fold.circuit} gave no design ({why}); "
@@ -73,7 +72,7 @@ def optimise_ranked(args, scene) -> tuple:
               f"{following.fold.circuit_choice['rank']} ({following.fold.circuit_choice['outcome']})",
               file=sys.stderr)
         scene = following
-    return code, scene
+    return optimise_scene(args, scene)[0], scene
 
 
 def optimise_scene(args, scene) -> tuple:

@@ -268,12 +268,12 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
             rows = kernels._near_rows(P, P.contact, box, R, p, near)
             a, b = P.contact[rows, 0].astype(int), P.contact[rows, 1].astype(int)
             spared.append(np.count_nonzero(near[6][a] + near[6][b] < near[7][rows]))
-            assert np.array_equal(kernels.rhs(P, y, near), kernels.rhs(P, y))
-            for got, want in zip(kernels.stiff_terms(P, y, near)[1:], kernels.stiff_terms(P, y)[1:]):
+            assert np.array_equal(kernels.rhs(P, y, near), kernels.rhs(P, y, None))
+            for got, want in zip(kernels.stiff_terms(P, y, near)[1:], kernels.stiff_terms(P, y, None)[1:]):
                 assert np.array_equal(got, want)
         records = {key: np.zeros(9) for key in ("near", "all")}
         kernels.contact_onsets(P, P.contact, y, result.t[j], records["near"], near)
-        kernels.contact_onsets(P, P.contact, y, result.t[j], records["all"])
+        kernels.contact_onsets(P, P.contact, y, result.t[j], records["all"], None)
         assert np.array_equal(records["near"], records["all"])
         overlapping = {r for r in range(len(P.contact)) if not kernels._pair_apart(P.contact, r, box)}
         assert overlapping <= set(rows.tolist())

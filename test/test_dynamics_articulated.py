@@ -15,7 +15,7 @@ from panel_deploy.dynamics.pack import EXACT, PENALTY, TREE, pack
 from panel_deploy.model import AirParameters, Body, Model, State, box_inertia
 from panel_deploy.scene import SimulationSection, load_scene
 
-from test_dynamics_helpers import SIZE, hinge
+from test_dynamics_helpers import SIZE, hinge, near
 
 SCENE = Path(__file__).resolve().parent.parent / "config" / "scenes" / "paper_4x4.yaml"
 
@@ -74,7 +74,7 @@ def test_factor_solve_and_product_are_the_dense_ones(model):
     n = P.n
     rng = np.random.default_rng(2)
     for y in states(model, 3):
-        M, _, (R, p, _, _, S), *_ = kernels.mass_and_bias(P, y[:n], y[n:2 * n])
+        M, _, (R, p, _, _, S), *_ = kernels.mass_and_bias(P, y[:n], y[n:2 * n], near(P))
         I6 = articulated.inertias(P, *kernels.body_inertias(P, R, p))
         arm = rng.uniform(0.0, 2.0, n) * np.diag(M)
         U, D, ok = articulated.factor(P, S, I6, arm)
@@ -98,7 +98,7 @@ def test_w_solve_is_the_dense_solve(model, rows_per_coordinate):
     n = P.n
     rng = np.random.default_rng(3)
     y = next(states(model, 1))
-    M, _, (R, p, _, _, S), *_ = kernels.mass_and_bias(P, y[:n], y[n:2 * n])
+    M, _, (R, p, _, _, S), *_ = kernels.mass_and_bias(P, y[:n], y[n:2 * n], near(P))
     Jb, hb = kernels.body_inertias(P, R, p)
     I6 = articulated.inertias(P, Jb, hb)
     r = int(rows_per_coordinate * n)
@@ -120,7 +120,7 @@ def test_factor_reports_a_singular_mass_matrix():
     model = random_tree(n=20)
     P = pack(model)._replace(mass=np.zeros(20), inertia=np.zeros((20, 3, 3)))
     y = next(states(model, 1))
-    assert np.all(np.isnan(kernels.rhs(P, y)))
+    assert np.all(np.isnan(kernels.rhs(P, y, near(P))))
 
 
 def dense_dynamics(P, y):
@@ -129,7 +129,8 @@ def dense_dynamics(P, y):
     ``J qdd = -gamma - 2 cdot / T - c / T^2`` (Baumgarte), J M^-1 J^T regularised
     as the package does."""
     n = P.n
-    M, Q, (R, p, w, vo, S), acc, _, dissipation, _ = kernels.mass_and_bias(P, y[:n], y[n:2 * n])
+    M, Q, (R, p, w, vo, S), acc, _, dissipation, _ = kernels.mass_and_bias(
+        P, y[:n], y[n:2 * n], near(P))
     qdd = np.linalg.solve(M, Q)
     if P.method != EXACT:
         return qdd, dissipation, 0.0
@@ -150,7 +151,7 @@ def test_rhs_is_the_dense_solve(model):
     n = P.n
     for y in states(model, 4):
         qdd, dissipation, power = dense_dynamics(P, y)
-        f = kernels.rhs(P, y)
+        f = kernels.rhs(P, y, near(P))
         assert np.abs(f[n:2 * n] - qdd).max() < 1e-9 * np.abs(qdd).max()
         assert np.array_equal(f[:n], y[n:2 * n])
         assert f[2 * n] == dissipation
@@ -170,12 +171,12 @@ def test_structured_w_step_is_the_dense_step(model, h):
         pytest.skip("the dense blocks of the exact closure are another W")
     N = 2 * P.n + 2
     for y in states(model, 3):
-        f = kernels.rhs(P, y)
-        A, B, ok = kernels.stiff_jacobian(P, y)
+        f = kernels.rhs(P, y, near(P))
+        A, B, ok = kernels.stiff_jacobian(P, y, near(P))
         assert ok
-        y_dense, e_dense, ok_dense = rosenbrock.step(P, y, f, h, A, B, np.empty((7, N)))
-        y_aba, e_aba, ok_aba = rosenbrock.step_terms(P, y, f, h, rosenbrock.terms(P, y),
-                                                     np.empty((7, N)))
+        y_dense, e_dense, ok_dense = rosenbrock.step(P, y, f, h, A, B, np.empty((7, N)), near(P))
+        y_aba, e_aba, ok_aba = rosenbrock.step_terms(P, y, f, h, rosenbrock.terms(P, y, near(P)),
+                                                     np.empty((7, N)), near(P))
         assert ok_dense and ok_aba
         # the error estimate is a difference of stages: its round-off scales with the step
         scale = np.abs(y_dense - y).max()

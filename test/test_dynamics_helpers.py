@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from panel_deploy.dynamics.kernels import near_pairs
 from panel_deploy.model import Body, ClosureParameters, Hinge, Model, box_inertia
 
 A, B, T, MASS = 0.1, 0.1, 0.005, 0.02
@@ -59,3 +60,9 @@ def ring_2x2(closure="penalty", k_M=1e6, c_M=280.0, baumgarte=1e-3, k_h=(0.1, 0.
     ]
     cl = ClosureParameters(closure, k_M, c_M, k_M, c_M, baumgarte, 1e-10)
     return Model.build(bodies, hinges, 0, cut_hinges=[2], k_s=1000.0, c_s=0.5, closure=cl)
+
+
+def near(P):
+    """A new candidate list of the panel contact pairs of ``P`` (kernels.near_pairs),
+    what a run passes the kernels."""
+    return near_pairs(P, P.contact)

@@ -12,7 +12,7 @@ from panel_deploy.dynamics.pack import pack
 from panel_deploy.kinematics import forward_kinematics, hinge_points
 from panel_deploy.model import AirParameters
 
-from test_dynamics_helpers import plate_on_hinge, random_branched
+from test_dynamics_helpers import near, plate_on_hinge, random_branched
 
 
 def law(theta, omega, k, c, k_s, c_s):
@@ -117,9 +117,9 @@ def test_forward_dynamics_matches_lagrange_reference(seed):
     omega = rng.normal(0, 2.0, model.n_coords)
     qdd_ref, M_ref = reference_qdd(model, theta, omega)
     y = np.concatenate([theta, omega, [0, 0]])
-    M, *_ = kernels.mass_and_bias(P, theta, omega)
+    M, *_ = kernels.mass_and_bias(P, theta, omega, near(P))
     assert np.allclose(M, M_ref, rtol=1e-6, atol=1e-12 * np.abs(M_ref).max())
-    qdd = kernels.rhs(P, y)[model.n_coords:2 * model.n_coords]
+    qdd = kernels.rhs(P, y, near(P))[model.n_coords:2 * model.n_coords]
     assert np.allclose(qdd, qdd_ref, rtol=1e-4, atol=1e-5 * np.abs(qdd_ref).max())
 
 
@@ -143,7 +143,7 @@ def test_exact_closure_jacobian_and_acceleration():
         return np.concatenate([Mb - Ma, [(Ra @ e1) @ (Nb - Na), (Ra @ e2) @ (Nb - Na)]])
 
     R, p, w, vo, S = kernels.kinematics(P, theta, omega)
-    M, Q, kin, acc, *_ = kernels.mass_and_bias(P, theta, omega)
+    M, Q, kin, acc, *_ = kernels.mass_and_bias(P, theta, omega, near(P))
     c, J, gamma = kernels.closure_jacobian(P, R, p, w, vo, S, acc)
     assert np.allclose(c, constraint(theta), atol=1e-14)
     J_ref = fd(constraint, theta)
@@ -151,7 +151,7 @@ def test_exact_closure_jacobian_and_acceleration():
     hh = 1e-5
     gamma_ref = (fd(constraint, theta + hh * omega) - fd(constraint, theta - hh * omega)) / (2 * hh) @ omega
     assert np.allclose(gamma, gamma_ref, rtol=1e-4, atol=1e-6 * np.abs(gamma_ref).max())
-    qdd = kernels.rhs(P, np.concatenate([theta, omega, [0, 0]]))[n:2 * n]
+    qdd = kernels.rhs(P, np.concatenate([theta, omega, [0, 0]]), near(P))[n:2 * n]
     T = model.closure.baumgarte
     residual = J @ qdd + gamma + 2 / T * (J @ omega) + c / T**2
     # a random 4-hinge spatial loop is over-constrained (J is 5 x 4 on the loop), so
@@ -206,8 +206,9 @@ def test_drag_torque_on_a_swinging_panel_is_the_closed_form(theta, omega):
     still = plate_on_hinge(k=0.0, c=0.0)
     air = dataclasses.replace(still, air=AirParameters(rho, cd))
     th, om = np.array([theta]), np.array([omega])
-    _, Q_air, *_, diss_air, _ = kernels.mass_and_bias(pack(air), th, om)
-    _, Q_still, *_, diss_still, _ = kernels.mass_and_bias(pack(still), th, om)
+    P_air, P_still = pack(air), pack(still)
+    _, Q_air, *_, diss_air, _ = kernels.mass_and_bias(P_air, th, om, near(P_air))
+    _, Q_still, *_, diss_still, _ = kernels.mass_and_bias(P_still, th, om, near(P_still))
     w, L = still.hinges[0].length, still.bodies[1].size[0]
     closed = -rho * cd * w * omega * abs(omega) * L**4 / 8
     assert Q_air[0] - Q_still[0] == pytest.approx(closed, rel=1e-12)

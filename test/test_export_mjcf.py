@@ -171,7 +171,7 @@ def _open_tree(model):
 def test_open_tree_accelerations_match_the_kernel(make):
     """MuJoCo's qacc with constraints off equals our forward dynamics (springs,
     dampers, gravity, cut-hinge spring) at random states inside (0, pi)."""
-    from panel_deploy.dynamics.kernels import rhs
+    from panel_deploy.dynamics.kernels import near_pairs, rhs
     from panel_deploy.dynamics.pack import pack
 
     model = make()
@@ -185,7 +185,7 @@ def test_open_tree_accelerations_match_the_kernel(make):
         d.qpos[idx] = theta
         d.qvel[idx] = omega
         mujoco.mj_forward(m, d)
-        ours = rhs(P, np.concatenate([theta, omega, [0.0, 0.0]]))[n:2 * n]
+        ours = rhs(P, np.concatenate([theta, omega, [0.0, 0.0]]), near_pairs(P, P.contact))[n:2 * n]
         assert np.all(np.isfinite(ours))
         np.testing.assert_allclose(d.qacc[idx], ours, rtol=1e-9, atol=1e-9 * np.abs(ours).max())
 
@@ -285,6 +285,8 @@ def test_air_maps_to_the_inertia_box_fluid_model():
         box = -rho * cd * (2 * rx * ry * (A / 2) ** 3 + 2 * ry * rz * (T / 2) ** 3
                            + 0.5 * ry * (rx**4 + rz**4)) * omega * abs(omega)
         assert d.qfrc_fluid[0] == pytest.approx(box, rel=1e-9)
-        ours = kernels.mass_and_bias(pack(model), np.array([theta]), np.array([omega]))[1][0]
+        P = pack(model)
+        ours = kernels.mass_and_bias(P, np.array([theta]), np.array([omega]),
+                                     kernels.near_pairs(P, P.contact))[1][0]
         assert ours == pytest.approx(-rho * cd * B * A**4 * omega * abs(omega) / 8, rel=1e-12)
         assert d.qfrc_fluid[0] / ours == pytest.approx(5 / 8, rel=1e-4)

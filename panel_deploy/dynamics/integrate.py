@@ -434,7 +434,7 @@ STIFF_STEP = 2e-4
 def stiffness(P, y) -> float:
     """Spectral radius (1/s) of the stiff part of the Jacobian at state y."""
     n = P.n
-    A, B, ok = kernels.stiff_jacobian(P, y)
+    A, B, ok = kernels.stiff_jacobian(P, y, kernels.near_pairs(P, P.contact))
     if not (ok and np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
         return math.inf
     J = np.block([[np.zeros((n, n)), np.eye(n)], [A, B]])
@@ -529,7 +529,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
 
     def jac(t, y):
         counts["njev"] += 1
-        return kernels.rhs_jacobian(P, y, kernels.rhs(P, y))
+        return kernels.rhs_jacobian(P, y, kernels.rhs(P, y, near), near)
 
     opts = dict(rtol=settings.rtol, atol=settings.atol, max_step=settings.max_step)
     if name in IMPLICIT:
@@ -653,7 +653,7 @@ def integrate_blocks(P, y0, t_eval, settings, max_steps, gap_limit, stops=None):
                          f"got {settings.method!r}")
     stops = (len(t_eval) - 1,) if stops is None else stops
     try:
-        finite = bool(np.all(np.isfinite(kernels.rhs(P, y0))))
+        finite = bool(np.all(np.isfinite(kernels.rhs(P, y0, kernels.near_pairs(P, P.contact)))))
     except ZeroDivisionError:
         finite = False
     if not finite:

@@ -31,6 +31,12 @@ Eq. (4) drops ``-k theta`` for theta > pi, a difference of k pi against the
 k_s term, which dominates within the 0.1 % penetration it allows. A scene's
 ``contact.stop_ramp`` brings k_s and c_s in smoothly over its first radians
 past the limit (:func:`stop_engagement`); 0 is the paper's law.
+
+Every kernel that reaches the panel contacts takes their candidate list
+``near`` (:func:`near_pairs`, or None for every pair) as a required argument:
+numba compiles a kernel apart for each way it is called (an omitted argument,
+an explicit None and a tuple are three types), so a default let the install
+compile the largest kernels two or three times over for each kind of model.
 """
 
 from __future__ import annotations
@@ -1055,7 +1061,7 @@ def panel_contacts(P, contact, R, p, w, vo, f, near):
 
 
 @njit(cache=True)
-def contact_onsets(P, contact, y, t, record, near=None):
+def contact_onsets(P, contact, y, t, record, near):
     """The fastest arriving panel contact at y: over the contact points shallower
     than CONTACT_RAMP (where the contact's force is not yet in full), the
     largest approach speed, into ``record`` (9,), laid out as
@@ -1156,8 +1162,10 @@ def _bias(P, theta, omega, kin, Jb, hb, near):
 
 
 @njit(cache=True)
-def mass_and_bias(P, theta, omega, near=None):
-    """Mass matrix, generalised force and everything the energy needs.
+def mass_and_bias(P, theta, omega, near):
+    """Mass matrix, generalised force and everything the energy needs, with
+    the panel contacts' candidate list ``near`` (:func:`near_pairs`; None:
+    every pair).
 
     Returns
     -------
@@ -1176,7 +1184,7 @@ def mass_and_bias(P, theta, omega, near=None):
 
 
 @njit(cache=True)
-def rhs(P, y, near=None):
+def rhs(P, y, near):
     """dy/dt of the state vector (see the module docstring); NaN if M is not positive definite.
     ``near``: the run's candidate list of panel contact pairs (:func:`near_pairs`),
     or None to test every pair.
@@ -1230,15 +1238,15 @@ def rhs(P, y, near=None):
 
 
 @njit(cache=True)
-def rhs_jacobian(P, y, f0):
-    """Forward-difference Jacobian d rhs / dy, (2n + 2, 2n + 2), given f0 = rhs(P, y)."""
+def rhs_jacobian(P, y, f0, near):
+    """Forward-difference Jacobian d rhs / dy, (2n + 2, 2n + 2), given f0 = rhs(P, y, near)."""
     N = y.shape[0]
     Jac = np.zeros((N, N))
     yp = y.copy()
     for j in range(2 * P.n):
         h = 1.4901161193847656e-08 * max(1.0, abs(y[j]))
         yp[j] = y[j] + h
-        Jac[:, j] = (rhs(P, yp) - f0) / h
+        Jac[:, j] = (rhs(P, yp, near) - f0) / h
         yp[j] = y[j]
     return Jac
 
@@ -1253,7 +1261,8 @@ def observe(P, y):
     n = P.n
     theta = y[:n]
     omega = y[n:2 * n]
-    M, Q, kin, acc, spring, dissipation, gravity_energy = mass_and_bias(P, theta, omega)
+    M, Q, kin, acc, spring, dissipation, gravity_energy = mass_and_bias(
+        P, theta, omega, near_pairs(P, P.contact))
     kinetic = 0.5 * _dot(omega, _mv(M, omega))
     R, p, w, vo, S = kin
     gap = 0.0
@@ -1353,7 +1362,7 @@ def _stop_share(P, theta):
 
 
 @njit(cache=True, inline='always')
-def stiff_terms(P, y, near=None):
+def stiff_terms(P, y, near):
     """The stiff springs and dampers in joint space, ``K = diag(Kd) + U^T
     diag(kk) U`` and ``C = diag(Cd) + U^T diag(cc) U`` (N m/rad, N m s/rad),
     at the current configuration.
@@ -1407,7 +1416,7 @@ def stiff_terms(P, y, near=None):
 
 
 @njit(cache=True)
-def stiff_jacobian(P, y, near=None):
+def stiff_jacobian(P, y, near):
     """The stiff linear part of ``A = d qdd / d theta`` and ``B = d qdd / d omega``, (n, n).
 
     Keeps only the springs and dampers of :func:`stiff_terms`, at the current

@@ -140,7 +140,7 @@ def _jac_times(n, A, B, u, out):
 
 
 @njit(cache=True)
-def terms(P, y, near=None):
+def terms(P, y, near):
     """The stiff Jacobian at y for :func:`step_terms`: (S, I6, Jb, hb, Kd, Cd,
     U, kk, cc), the terms of :func:`kernels.stiff_terms` with the joint screws S,
     the spatial inertias I6 of the mass matrix (:mod:`.articulated`) and the
@@ -299,7 +299,7 @@ def _solution(y, K):
 
 
 @njit(cache=True)
-def step(P, y, f, h, A, B, K, near=None):
+def step(P, y, f, h, A, B, K, near):
     """One ROS34PW2 step of length h from y (f = rhs(P, y)) with Jacobian blocks A, B.
 
     Stages go to K (4, N). Returns (y1, err, ok): the order-3 solution, the
@@ -345,7 +345,7 @@ def step(P, y, f, h, A, B, K, near=None):
 
 
 @njit(cache=True)
-def step_terms(P, y, f, h, jac, K, near=None):
+def step_terms(P, y, f, h, jac, K, near):
     """:func:`step` with the stiff Jacobian as the terms of :func:`terms`, in O(n r).
 
     Solves the reduced system times M, ``(M + hg C + hg^2 K) v = h M f_v - h

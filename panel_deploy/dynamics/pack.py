@@ -185,3 +185,12 @@ def pack(model: Model) -> Packed:
         half=f3([0.5 * model.bodies[b].size for b in body_of + [model.ground]]),
         contact=_contact_rows(model, index),
     )
+
+
+def kinematic_part(P: Packed) -> Packed:
+    """``P`` without its air and panel contacts (``air`` and ``contact`` None):
+    all that the kinematics, the loop residuals and the collision check read.
+    numba types a None field and an array field apart, so the kernels they
+    call compile once for every kind of model instead of once for each.
+    """
+    return P._replace(air=None, contact=None)

@@ -22,6 +22,8 @@ from panel_deploy.model import Body, Hinge, Model, State, box_inertia
 from panel_deploy.scene import SimulationSection, load_scene
 from panel_deploy.summary import deployment_summary, deployment_text
 
+from test_dynamics_helpers import near as new_list
+
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "config" / "scenes" / "paper_4x4.yaml"
 HALF = np.array([0.05, 0.05, 0.0025])
@@ -252,9 +254,10 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
     list of contact pairs (kernels.near_pairs), the separating axes and the
     slacks it remembers, kept across the samples of a 6 x 6 deployment and
     a state just after each (where the slacks spare most pairs their test),
-    rebuilt as the panels move, equal those testing every pair, to the bit;
-    at every sample each pair whose boxes overlap is on the list, and the
-    list is a small part of the pairs."""
+    rebuilt as the panels move, equal those with a new list at each call
+    (built at that pose, remembering nothing), to the bit; at every sample
+    each pair whose boxes overlap is on the list, so no list leaves out a
+    pair that touches; and the list is a small part of the pairs."""
     _, model, result = six_by_six["true"]
     P = pack(model)
     n = P.n
@@ -268,12 +271,13 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
             rows = kernels._near_rows(P, P.contact, box, R, p, near)
             a, b = P.contact[rows, 0].astype(int), P.contact[rows, 1].astype(int)
             spared.append(np.count_nonzero(near[6][a] + near[6][b] < near[7][rows]))
-            assert np.array_equal(kernels.rhs(P, y, near), kernels.rhs(P, y, None))
-            for got, want in zip(kernels.stiff_terms(P, y, near)[1:], kernels.stiff_terms(P, y, None)[1:]):
+            assert np.array_equal(kernels.rhs(P, y, near), kernels.rhs(P, y, new_list(P)))
+            for got, want in zip(kernels.stiff_terms(P, y, near)[1:],
+                                 kernels.stiff_terms(P, y, new_list(P))[1:]):
                 assert np.array_equal(got, want)
         records = {key: np.zeros(9) for key in ("near", "all")}
         kernels.contact_onsets(P, P.contact, y, result.t[j], records["near"], near)
-        kernels.contact_onsets(P, P.contact, y, result.t[j], records["all"], None)
+        kernels.contact_onsets(P, P.contact, y, result.t[j], records["all"], new_list(P))
         assert np.array_equal(records["near"], records["all"])
         overlapping = {r for r in range(len(P.contact)) if not kernels._pair_apart(P.contact, r, box)}
         assert overlapping <= set(rows.tolist())

@@ -78,10 +78,12 @@ def test_the_core_never_imports_ros():
         assert not imported_top_modules([path]) & ros, path
 
 
-def test_ros_command_without_rclpy_says_how_to_install():
+def test_ros_command_without_rclpy_says_how_to_install(tmp_path):
     code = ("import sys; sys.modules['rclpy'] = None; from panel_deploy.cli import main; "
             "sys.exit(main(['run', 'paper_4x4']))")
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    # cwd: the package under test, not the checkout that ``-c`` would import
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                          cwd=tmp_path)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert proc.stderr.strip().splitlines() == [proc.stderr.strip()]
     assert 'pip install "panel_deploy[ros]"' in proc.stderr

@@ -37,8 +37,10 @@ sys.exit(main(["simulate", "paper_4x4", "--t-end", "10", "--set", "simulation.sa
 
 def test_sigkill_mid_run_loses_at_most_half_a_second(tmp_path):
     path = tmp_path / "killed.mcap"
+    # cwd: not the checkout, which ``-c`` would import instead of the package under
+    # test (in CI its kernels then compiled first: 135 s instead of 10)
     proc = subprocess.Popen([sys.executable, "-c", CHILD, str(path)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     computed = 0.0
     try:
         for line in proc.stdout:

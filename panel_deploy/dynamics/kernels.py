@@ -33,10 +33,10 @@ k_s term, which dominates within the 0.1 % penetration it allows. A scene's
 past the limit (:func:`stop_engagement`); 0 is the paper's law.
 
 Every kernel that reaches the panel contacts takes their candidate list
-``near`` (:func:`near_pairs`, or None for every pair) as a required argument:
-numba compiles a kernel apart for each way it is called (an omitted argument,
-an explicit None and a tuple are three types), so a default let the install
-compile the largest kernels two or three times over for each kind of model.
+``near`` (:func:`near_pairs`) as a required argument: numba compiles a kernel
+apart for each way it is called (an omitted argument, None and a tuple are
+three types), and a default of None let the install compile the largest
+kernels two or three times over for each kind of model.
 """
 
 from __future__ import annotations
@@ -970,24 +970,15 @@ def _touching(P, contact, R, p, near):
     (R, p): every other pair is apart, and :func:`_pair_points` would find
     no point of it.
 
-    Without a candidate list (``near`` None) the pairs whose :func:`_boxes`
-    overlap. With one (:func:`near_pairs`), of its pairs: those whose bodies
-    have moved less than their slack since their last test are apart; the
-    rest get the box test, then the separating axes, the one that separated
+    Of the pairs on the candidate list ``near`` (:func:`near_pairs`): those
+    whose bodies have moved less than their slack since their last test are
+    apart; the rest get the box test, then the separating axes, the one that separated
     the pair last first (while an array deploys, most pairs whose boxes
     overlap are apart: 221 of 222 on 10 x 10 at 0.1 s), and the gap found
     sets the slack. One loop here, not a call a pair: passing the list to a
     function costs ~60 ns a call in reference counts, more than the test.
     """
     box = _boxes(P, R, p)
-    if near is None:
-        out = np.empty(contact.shape[0], np.int64)
-        m = 0
-        for r in range(contact.shape[0]):
-            if not _pair_apart(contact, r, box):
-                out[m] = r
-                m += 1
-        return out[:m]
     rows = _near_rows(P, contact, box, R, p, near)
     axes, moved, slack = near[3], near[6], near[7]
     out = np.empty(rows.shape[0], np.int64)
@@ -1035,7 +1026,7 @@ def panel_contacts(P, contact, R, p, w, vo, f, near):
     spring stores its energy; the rest of the push's work, (push - spring) s
     >= 0, is dissipated (s is d's rate up to the motion of the point).
     ``contact`` is ``P.contact``, passed apart so numba prunes this for None;
-    ``near`` a candidate list (:func:`near_pairs`) or None for every pair.
+    ``near`` the run's candidate list (:func:`near_pairs`).
     """
     if contact is None:
         return 0.0, 0.0
@@ -1076,8 +1067,7 @@ def contact_onsets(P, contact, y, t, record, near):
     later (the paper scene's r1c2+r1c3 on r2c4, 50 us samples: one point at
     0.000 m/s, the next sample another at 0.097 m/s; r4c1 on r4c4 was missed so,
     one point pressing a step before its four), and a pair resting in light contact can
-    still be struck. ``near``: the run's candidate list (:func:`near_pairs`),
-    or None to test every pair.
+    still be struck. ``near``: the run's candidate list (:func:`near_pairs`).
     """
     if contact is None:
         return
@@ -1103,8 +1093,7 @@ def contact_onsets(P, contact, y, t, record, near):
 def _bias(P, theta, omega, kin, Jb, hb, near):
     """Generalised force minus bias by recursive Newton-Euler with zero joint
     acceleration, for the kinematics ``kin`` and :func:`body_inertias`' (J, h),
-    and the panel contacts' candidate list ``near`` (:func:`near_pairs`; None:
-    every pair).
+    and the panel contacts' candidate list ``near`` (:func:`near_pairs`).
 
     Returns Q (n,) N m (``M qdd = Q`` for the tree), the velocity-product
     spatial accelerations (n + 1, 6), and the spring energy, dissipation and
@@ -1164,8 +1153,7 @@ def _bias(P, theta, omega, kin, Jb, hb, near):
 @njit(cache=True)
 def mass_and_bias(P, theta, omega, near):
     """Mass matrix, generalised force and everything the energy needs, with
-    the panel contacts' candidate list ``near`` (:func:`near_pairs`; None:
-    every pair).
+    the panel contacts' candidate list ``near`` (:func:`near_pairs`).
 
     Returns
     -------
@@ -1186,8 +1174,7 @@ def mass_and_bias(P, theta, omega, near):
 @njit(cache=True)
 def rhs(P, y, near):
     """dy/dt of the state vector (see the module docstring); NaN if M is not positive definite.
-    ``near``: the run's candidate list of panel contact pairs (:func:`near_pairs`),
-    or None to test every pair.
+    ``near``: the run's candidate list of panel contact pairs (:func:`near_pairs`).
 
     Solves ``M qdd = Q`` by the articulated-body algorithm (O(n)) where
     :func:`articulated.applies`, else by CRBA and Cholesky.
@@ -1309,7 +1296,7 @@ def _pressed_points(P, contact, R, p, near):
     """The panel contact points pressed (depth > 0) at poses (R, p): (count,
     rows), row i < count ``[pair, normal (3), point (3, m), depth (m)]``, so that
     the separating axes run once a call, not once to count and again to fill.
-    ``near``: the run's candidate list (:func:`near_pairs`), or None."""
+    ``near``: the run's candidate list (:func:`near_pairs`)."""
     rows = np.empty((64, 8))
     count = 0
     if contact is None:

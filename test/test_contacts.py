@@ -1,6 +1,7 @@
 """Panel-to-panel contact: where it acts (boxes.contact), which pairs get it
 (contacts), the force law against a closed form, and the stacks it holds."""
 
+import dataclasses
 import math
 import sys
 from pathlib import Path
@@ -247,6 +248,34 @@ def test_the_stacks_of_a_6x6_array_no_longer_pass_through_each_other(six_by_six)
     without = reports["false"].first_collision
     assert without is not None and set(without.names) == {"r3c6", "r4c2"} and without.t < 0.045
     assert not reports["true"].collided, reports["true"].to_text()
+
+
+def test_the_fastest_press_is_the_fastest_onset_and_an_impact_from_the_impact_speed(six_by_six):
+    """The 6 x 6 stacks press without a collision: the report's fastest press
+    is the fastest contact onset the integrator recorded, on a contact pair,
+    below the impact speed; with the impact speed set to it, that same onset
+    is the first collision (an impact), and the presses before it are
+    slower."""
+    scene, model, result = six_by_six["true"]
+    report = check_trajectory(model, result)
+    onsets = result.contact_onsets
+    j = int(np.nanargmax(onsets[:, 1]))
+    assert not report.collided
+    assert 0.0 < report.press_speed == onsets[j, 1] < scene.collision.impact_speed
+    assert report.press_time == onsets[j, 0]
+    a, b = model.contact_pairs[int(onsets[j, 2])]
+    assert report.press_pair == (model.bodies[a].name, model.bodies[b].name)
+    assert report.to_dict()["press_speed"] == report.press_speed
+    assert f"fastest press {report.press_speed:.3g} m/s" in report.to_text()
+
+    lower = dataclasses.replace(scene.collision, impact_speed=report.press_speed)
+    struck = check_trajectory(model, result, lower)
+    first = struck.first_collision
+    assert first.impact and first.t == report.press_time
+    assert set(first.names) == set(report.press_pair)
+    assert struck.press_speed < lower.impact_speed
+    if struck.press_pair is not None:
+        assert struck.press_time < first.t
 
 
 def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):

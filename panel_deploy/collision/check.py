@@ -69,6 +69,14 @@ class CollisionReport:
     note : str or None
         When the first collision is a press (:func:`compliance_note`), why
         its verdict can depend on a compliance of the model.
+    press_speed : float
+        The fastest panel contact onset over the valid trajectory, all of
+        them slower than ``collision.impact_speed`` (presses, not impacts),
+        m/s; 0 if none (and without panel contact). How far the verdict is
+        from an impact: ``impact_speed - press_speed``.
+    press_time : float
+        Its time, s (nan if none).
+    press_pair : (str, str) or None
     """
 
     pairs: np.ndarray
@@ -90,6 +98,9 @@ class CollisionReport:
     flat_contact: np.ndarray = field(default=None, repr=False)
     first_sample: int = 0
     note: str | None = None
+    press_speed: float = 0.0
+    press_time: float = math.nan
+    press_pair: tuple | None = None
 
     @property
     def samples_checked(self) -> int:
@@ -132,6 +143,9 @@ class CollisionReport:
             "counters": dict(self.counters),
             "wall_time": self.wall_time,
             "note": self.note,
+            "press_speed": self.press_speed,
+            "press_time": None if math.isnan(self.press_time) else self.press_time,
+            "press_pair": list(self.press_pair) if self.press_pair else None,
         }
         if arrays:
             out.update(t=self.t.tolist(), pairs=[list(n) for n in self.pair_names],
@@ -165,6 +179,10 @@ class CollisionReport:
         else:
             lines.append(f"d = {self.d * 1e3:.3f} mm at t = {self.d_time:.4f} s "
                          f"({self.d_pair[0]} - {self.d_pair[1]}), over {self.n_valid} valid samples")
+        if self.press_pair:
+            lines.append(f"fastest press {self.press_speed:.3g} m/s at t = {self.press_time:.4f} s "
+                         f"({self.press_pair[0]} - {self.press_pair[1]}), impacts from "
+                         f"{self.collision.impact_speed:g} m/s")
         return "\n".join(lines)
 
 
@@ -261,6 +279,7 @@ class TrajectoryCheck:
         self.first_events: list = []
         self.n_valid = None
         self.d, self.d_time, self.d_pair = math.inf, math.nan, None
+        self.press = None  # the fastest onset row below the impact speed, before any collision
         # contact pair index -> checked pair index (contact pairs are collision pairs)
         index = {pair: k for k, pair in enumerate(model.collision_pairs)} if model.contact_pairs else {}
         self._impact_pair = [index[pair] for pair in model.contact_pairs]
@@ -301,6 +320,8 @@ class TrajectoryCheck:
         events = m.update(t, theta, omega, poses)
         if onset is not None and onset[1] >= self.collision.impact_speed:
             events = sorted([*events, self._impact(onset, self.checked)], key=lambda e: e.t)
+        elif onset is not None and not (events or self.first_events):
+            self._note_press(onset)
         j = self.checked - self._dropped
         if self.keep is not None and j == 2 * self.keep:
             # Amortised O(P) per sample: drop the older half once per keep samples.
@@ -330,6 +351,8 @@ class TrajectoryCheck:
         collision is then the one :meth:`update` with the onset would give.
         """
         if not onset[1] >= self.collision.impact_speed:
+            if not self.first_events:
+                self._note_press(onset)
             return []
         # The samples before the onset are valid; the one whose interval holds it is not.
         kept = self.checked - self._dropped
@@ -340,6 +363,12 @@ class TrajectoryCheck:
         elif sample == self.n_valid:
             self.first_events = sorted([*self.first_events, event], key=lambda e: e.t)
         return [event]
+
+    def _note_press(self, onset) -> None:
+        """Keep ``onset`` (a contact onset row slower than the impact speed) if
+        it is the fastest so far."""
+        if onset[1] > 0.0 and (self.press is None or onset[1] > self.press[1]):
+            self.press = np.array(onset, dtype=float)
 
     def _impact(self, onset, sample: int) -> CollisionEvent:
         """The collision event of a contact onset record (``result.ONSET_COLUMNS``),
@@ -371,4 +400,12 @@ class TrajectoryCheck:
             collision=self.collision, wall_time=time.perf_counter() - self._start,
             flat_contact=m.flat_contact, first_sample=self._dropped,
             note=compliance_note(self.monitor.model, self.first_events[0] if self.first_events else None,
-                                 self.collision.impact_speed))
+                                 self.collision.impact_speed),
+            **self._press_fields())
+
+    def _press_fields(self) -> dict:
+        if self.press is None:
+            return {}
+        k = self._impact_pair[int(self.press[2])]
+        return dict(press_speed=float(self.press[1]), press_time=float(self.press[0]),
+                    press_pair=self.monitor.pair_names(k))

@@ -59,6 +59,10 @@ class Outcome:
     flat_tolerance : float
         The largest |theta| at which the run counted as flat, rad (the
         scene's ``simulation.flat_tolerance``).
+    press_speed : float
+        The fastest panel contact onset of the valid run, slower than the
+        scene's ``collision.impact_speed``, m/s (0 if none):
+        :attr:`~panel_deploy.collision.CollisionReport.press_speed`.
     """
 
     collided: bool
@@ -71,6 +75,7 @@ class Outcome:
     wall_time: float = 0.0
     t_stop: float = math.nan
     flat_tolerance: float = FLAT_TOLERANCE
+    press_speed: float = 0.0
 
     @property
     def reached_flat(self) -> bool:
@@ -102,7 +107,8 @@ class Evaluation:
                 "collision": o.first_collision if o.collided else None,
                 "flat_residual": float(o.flat_residual), "reached_flat": o.reached_flat,
                 "simulated": o.simulated, "message": o.message,
-                "t_stop": float(o.t_stop) if math.isfinite(o.t_stop) else None}
+                "t_stop": float(o.t_stop) if math.isfinite(o.t_stop) else None,
+                "press_speed": float(o.press_speed)}
 
 
 def objective(outcome: Outcome, p: float, q: float, flat_weight: float) -> float:
@@ -212,7 +218,8 @@ def run_deployment(model, scene) -> Outcome:
         message=result.message,
         wall_time=time.perf_counter() - start,
         t_stop=float(report.t[-1]) if len(report.t) else math.nan,
-        flat_tolerance=sim.flat_tolerance)
+        flat_tolerance=sim.flat_tolerance,
+        press_speed=float(report.press_speed))
 
 
 def evaluate(model, k, scene, *, c=None, evaluation=run_deployment) -> Evaluation:

@@ -43,7 +43,8 @@ FORMAT = "panel_deploy.stiffness/1"
 #: ``panel-deploy optimise`` write); any other is refused by :func:`load_hinges`.
 RESULT_KEYS = ("format", "scene", "hinges", "groups", "bounds", "damping_ratio",
                "damping_ratio_bounds", "damping_window", "f", "v", "d", "collision",
-               "flat_residual", "reached_flat", "simulated", "message", "t_stop", "initial",
+               "flat_residual", "reached_flat", "simulated", "message", "t_stop", "press_speed",
+               "initial",
                "success", "status", "nfev", "nit", "nstarts", "method", "wall_time",
                "first_feasible", "verification", "manufacture", "tolerance", "circuit",
                "circuit_choice")

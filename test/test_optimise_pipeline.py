@@ -244,3 +244,16 @@ def test_optimise_command_without_a_feasible_k_says_what_to_try(monkeypatch, cap
     assert "damping_ratio_bounds" in err
     searched = SimpleNamespace(problem=SimpleNamespace(damping_variable=True))
     assert "damping_ratio_bounds" not in command.next_steps(searched, None)
+
+
+def test_the_verdict_names_the_fastest_press_of_a_feasible_design():
+    """optimise's verdict line on a feasible K says how close its panel contacts came
+    to an impact; without panel contact (press 0) it says nothing of it."""
+    from panel_deploy.cli.optimise import verdict
+    from panel_deploy.optimise import Evaluation
+
+    def line(press):
+        o = Outcome(collided=False, v=0.0, d=0.0751, flat_residual=0.0499, press_speed=press)
+        return verdict("re-check", Evaluation(np.ones(2), np.ones(2), -0.751, o))
+    assert line(0.041) == "re-check: collision-free and flat, d = 75.1 mm, fastest press 0.041 m/s"
+    assert line(0.0) == "re-check: collision-free and flat, d = 75.1 mm"

@@ -195,7 +195,8 @@ def verdict(label, check) -> str:
                        f"approach speed {o.v:.3f} m/s")
     if not o.reached_flat:
         return head + f"collision-free but never flat (closest {o.flat_residual:.3f} rad)"
-    return head + f"collision-free and flat, d = {o.d * 1e3:.3g} mm"
+    press = f", fastest press {o.press_speed:.3g} m/s" if o.press_speed > 0 else ""
+    return head + f"collision-free and flat, d = {o.d * 1e3:.3g} mm{press}"
 
 
 def next_steps(result, out) -> str:

@@ -10,12 +10,15 @@ import sys
 import threading
 import time
 from pathlib import Path
+from uuid import uuid4
 
 import rclpy
 from rclpy.action import ActionClient
+from rclpy.action.client import ClientGoalHandle
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from std_srvs.srv import Trigger
+from unique_identifier_msgs.msg import UUID
 
 from panel_deploy import contract
 from panel_deploy.nodes import messages
@@ -109,7 +112,15 @@ class Client:
         return self.call(Trigger, service)
 
     def send_goal(self, action: contract.Service, node: str, timeout=60.0, **fields) -> "Goal":
-        """A goal of ``action`` sent to the server of ``node`` (its full name), accepted."""
+        """A goal of ``action`` sent to the server of ``node`` (its full name), accepted.
+
+        Sent again every ANSWER s while neither its answer nor its feedback has
+        come, as a service request is (:func:`_answered`); but a goal whose
+        answer was lost runs all the same, and sent again it would run twice (a
+        dynamics node then deployed twice and its clock went back, seen under
+        load). A goal whose feedback came is running: it is taken by its id,
+        not sent again.
+        """
         action_type = messages.message_class(action.type)
         key = (action_type, f"{node}/{action.name}")
         if key not in self._clients:
@@ -117,10 +128,32 @@ class Client:
         client = self._clients[key]
         assert client.wait_for_server(timeout_sec=timeout), f"{key[1]} not available"
         goal = Goal()
-        future = _answered(lambda: client.send_goal_async(
-            action_type.Goal(**fields), feedback_callback=lambda f: goal.feedback.append(f.feedback)),
-            timeout, key[1])
-        goal.start(future.result())
+        sent, running = [], []
+
+        def send():
+            goal_id = UUID(uuid=list(uuid4().bytes))
+
+            def feedback(message, goal_id=goal_id):
+                running.append(goal_id)
+                goal.feedback.append(message.feedback)
+            sent.append(goal_id)
+            return client.send_goal_async(action_type.Goal(**fields), feedback_callback=feedback,
+                                          goal_uuid=goal_id)
+        futures = [send()]
+        end = time.monotonic() + timeout
+        resend = time.monotonic() + ANSWER
+        while not any(f.done() for f in futures) and not running:
+            assert time.monotonic() < end, f"{key[1]} did not answer"
+            if time.monotonic() > resend:
+                futures.append(send())
+                resend = time.monotonic() + ANSWER
+            time.sleep(0.02)
+        answered = [f for f in futures if f.done()]
+        if answered:
+            goal.start(answered[0].result())
+        else:  # its answer was lost: the goal its feedback names
+            accepted = action_type.Impl.SendGoalService.Response(accepted=True)
+            goal.start(ClientGoalHandle(client, running[0], accepted))
         return goal
 
     def start_goal(self, action: contract.Service, node: str, **fields) -> "Goal":

@@ -84,6 +84,14 @@ def test_factor_solve_and_product_are_the_dense_ones(model):
         articulated.solve(P, S, U, D, tau, x, np.empty((n + 1, 6)))
         ref = np.linalg.solve(M + np.diag(arm), tau)
         assert np.abs(x - ref).max() < 1e-10 * np.abs(ref).max()
+        # many right-hand sides in one pass: each row as the single solve, to the bit
+        T = np.vstack([tau, rng.normal(size=(4, n))])
+        X = np.empty_like(T)
+        articulated.solve_rows(P, S, U, D, T, X, np.empty((len(T), n + 1, 6)))
+        assert np.array_equal(X[0], x)
+        for row, sol in zip(T[1:], X[1:]):
+            articulated.solve(P, S, U, D, row, x, np.empty((n + 1, 6)))
+            assert np.array_equal(sol, x)
         out = np.empty(n)
         articulated.times(P, S, I6, tau, out, np.empty((2, n + 1, 6)))
         assert np.abs(out - M @ tau).max() < 1e-12 * np.abs(M).max() * np.abs(tau).max()

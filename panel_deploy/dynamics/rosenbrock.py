@@ -186,9 +186,7 @@ def _w_factor(P, hg, S, I6, Jb, hb, Kd, Cd, U, kk, cc):
     cap = np.zeros((r, r))
     if not ok:
         return UA, D, Z, wq, cap, np.arange(r), False, False
-    work = np.empty((n + 1, 6))
-    for q in range(r):
-        articulated.solve(P, S, UA, D, U[q], Z[q], work)
+    articulated.solve_rows(P, S, UA, D, U, Z, np.empty((r, n + 1, 6)))
     for q in range(r):
         for c in range(r):
             s = 0.0

@@ -15,6 +15,14 @@ cached as numba does by default. When the package folder is not writable (a
 system or read-only site-packages) numba cannot use it, so :func:`configure`
 points ``NUMBA_CACHE_DIR`` at a per-user folder, unless the user chose one.
 
+numba stamps a cached kernel with its own source file only, so a kernel
+that calls into another file (the integrator's loop into the dynamics, the
+collision search into the kinematics) would load stale after that file
+changed: in a checkout, an edited right-hand side would leave the compiled
+loops running the old one. This package's locators stamp each of its kernels with
+:func:`kernel_sources_stamp`, a hash of every file in
+:data:`KERNEL_SOURCES`: any change to one recompiles them all on first use.
+
 This has to happen before the first ``@njit(cache=True)`` is decorated,
 since numba picks a function's cache folder then: ``panel_deploy/__init__``
 calls it before any kernel module is imported.
@@ -22,6 +30,7 @@ calls it before any kernel module is imported.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import sys
 from pathlib import Path
@@ -36,9 +45,19 @@ COMPILED_MARKER = PACKAGE_DIR / "_kernels_compiled"
 NUMBA_LOCATORS = ("UserProvidedCacheLocator,InTreeCacheLocator,UserWideCacheLocator,"
                   "IPythonCacheLocator,ZipCacheLocator")
 
-#: The locator of the compiled kernels, then numba's; a user's own
-#: ``NUMBA_CACHE_LOCATOR_CLASSES`` is left alone.
-LOCATORS = f"panel_deploy._kernel_locator.CompiledKernelsLocator,{NUMBA_LOCATORS}"
+#: This package's locators (:mod:`panel_deploy._kernel_locator`: the kernels
+#: compiled at install, then the user's folder, then next to the sources), then
+#: numba's for other packages; a user's own ``NUMBA_CACHE_LOCATOR_CLASSES`` is left alone.
+LOCATORS = ",".join([*(f"panel_deploy._kernel_locator.{name}" for name in
+                       ("CompiledKernelsLocator", "UserDirKernelsLocator", "InTreeKernelsLocator")),
+                     NUMBA_LOCATORS])
+
+#: The package's files that hold compiled kernels or constants compiled into
+#: them, relative to the package: the sources of :func:`kernel_sources_stamp`
+#: (test_startup checks that every file with a kernel is here).
+KERNEL_SOURCES = ("boxes.py", "collision/geometry.py", "collision/monitor.py", "collision/motion.py",
+                  "collision/refine.py", "dynamics/articulated.py", "dynamics/integrate.py",
+                  "dynamics/kernels.py", "dynamics/pack.py", "dynamics/rosenbrock.py")
 
 NOTICE = "panel-deploy: compiling kernels for this machine, first run only (a minute or two)"
 
@@ -61,17 +80,28 @@ def chosen_cache_dir(package_dir=PACKAGE_DIR, environ=os.environ) -> str | None:
     return str(user_cache_dir(environ))
 
 
+def kernel_sources_stamp(package_dir=PACKAGE_DIR) -> str:
+    """The SHA-256 (hex) of the contents of :data:`KERNEL_SOURCES` under
+    ``package_dir``: the source stamp of every kernel of the package, which
+    changes with any of those files and not with their times (a build and the
+    installation it makes hold the same bytes, not the same times)."""
+    digest = hashlib.sha256()
+    for name in KERNEL_SOURCES:
+        digest.update(name.encode() + b"\0" + (Path(package_dir) / name).read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
 def configure() -> None:
     """Point numba at the kernels compiled at install, and at a writable cache.
 
-    Sets ``NUMBA_CACHE_LOCATOR_CLASSES`` to :data:`LOCATORS` when the package
-    carries :data:`COMPILED_MARKER` (and the user set no locators), and
-    ``NUMBA_CACHE_DIR`` to :func:`chosen_cache_dir` when that is not None.
+    Sets ``NUMBA_CACHE_LOCATOR_CLASSES`` to :data:`LOCATORS` (unless the user
+    set locators), and ``NUMBA_CACHE_DIR`` to :func:`chosen_cache_dir` when
+    that is not None.
     Through the environment, so that worker processes inherit them; numba's
     config is updated too when numba was imported first.
     """
     chosen = {}
-    if COMPILED_MARKER.exists() and not os.environ.get("NUMBA_CACHE_LOCATOR_CLASSES"):
+    if not os.environ.get("NUMBA_CACHE_LOCATOR_CLASSES"):
         chosen["NUMBA_CACHE_LOCATOR_CLASSES"] = ("CACHE_LOCATOR_CLASSES", LOCATORS)
     path = chosen_cache_dir()
     if path is not None:

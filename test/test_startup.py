@@ -165,3 +165,48 @@ def test_pip_installed_package_runs_paper_scene_without_compiling(tmp_path):
     assert out.returncode == 0, out.stderr
     assert _numba_cache.NOTICE not in out.stderr
     assert not list(user_cache.rglob("*.nbi"))
+
+
+def test_every_file_with_a_kernel_is_a_kernel_source():
+    package = Path(panel_deploy.__file__).parent
+    with_kernels = {str(p.relative_to(package)) for p in package.rglob("*.py")
+                    if any(line.startswith("@njit") for line in p.read_text().splitlines())}
+    assert with_kernels and with_kernels <= set(_numba_cache.KERNEL_SOURCES)
+
+
+def test_the_kernel_stamp_follows_the_sources_contents_not_their_times(tmp_path):
+    package = _package_copy(tmp_path)
+    stamp = _numba_cache.kernel_sources_stamp(package)
+    assert stamp == _numba_cache.kernel_sources_stamp(Path(panel_deploy.__file__).parent)
+    os.utime(package / "dynamics" / "kernels.py", (1e9, 1e9))
+    assert _numba_cache.kernel_sources_stamp(package) == stamp
+    with open(package / "boxes.py", "a") as f:
+        f.write("# an edit\n")
+    assert _numba_cache.kernel_sources_stamp(package) != stamp
+
+
+def test_the_packages_kernels_carry_the_kernel_stamp():
+    from panel_deploy.dynamics import integrate, kernels
+    for kernel in (kernels.rhs, integrate.COMPILED_LOOPS[integrate.DOPRI5]):
+        assert kernel._cache._cache_file._source_stamp == _numba_cache.kernel_sources_stamp()
+
+
+# integrate.first_switch calls kernels.contact_mode, in another file
+SWITCH = """
+import numpy as np
+from panel_deploy.dynamics import integrate
+print(integrate.first_switch(1, np.array([1.0, -2.0]), np.array([-1.0, -2.0]), 1.0, 1e-9))
+"""
+
+
+def test_a_kernel_recompiles_when_a_file_it_calls_into_changes(tmp_path):
+    """numba stamps a cached kernel with its own file only: first_switch, cached
+    before contact_mode (kernels.py) was edited, would keep the old one."""
+    package = _package_copy(tmp_path / "site")
+    env = {"PYTHONPATH": str(tmp_path / "site")}
+    assert 0.0 < float(_run(SWITCH, env, tmp_path, locators=None).stdout) < 1.0  # theta crosses 0
+    source = package / "dynamics" / "kernels.py"
+    law = "return 0 if theta < 0.0 else (2 if theta > PI else 1)"
+    assert law in source.read_text()
+    source.write_text(source.read_text().replace(law, "return 1"))  # no limit any more
+    assert float(_run(SWITCH, env, tmp_path, locators=None).stdout) == 2.0  # no switch

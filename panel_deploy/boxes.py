@@ -277,6 +277,20 @@ def _overlap_corners(A, ma, B, mb, on, merge, out):
     return count
 
 
+@njit(cache=True, inline='always')
+def plane_axes(n):
+    """Unit vectors (e1, e2) (3-tuples) that make (e1, e2, n) a right-handed
+    frame for the unit normal n (3-tuple): e1 from the frame axis least
+    aligned with n."""
+    k = 0 if abs(n[0]) <= min(abs(n[1]), abs(n[2])) else (1 if abs(n[1]) <= abs(n[2]) else 2)
+    t = (1.0 - n[k] * n[0] if k == 0 else -n[k] * n[0],
+         1.0 - n[k] * n[1] if k == 1 else -n[k] * n[1],
+         1.0 - n[k] * n[2] if k == 2 else -n[k] * n[2])
+    norm = math.sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2])
+    e1 = (t[0] / norm, t[1] / norm, t[2] / norm)
+    return e1, (n[1] * e1[2] - n[2] * e1[1], n[2] * e1[0] - n[0] * e1[2], n[0] * e1[1] - n[1] * e1[0])
+
+
 #: Most contact points of one pair: 8 corners inside plus 8 edge crossings.
 MAX_POINTS = 16
 
@@ -318,14 +332,7 @@ def contact(Ra, ca, ha, Rb, cb, hb, work):
     Va, Vb, Fa, Fb, A, B, angle, corners2, points, depths = work
     ma, _ = _feature(corners_into(Ra, ca, ha, Va), n, 1.0, eps, Fa)
     mb, _ = _feature(corners_into(Rb, cb, hb, Vb), n, -1.0, eps, Fb)
-    # a unit e1 normal to n, from the frame axis least aligned with it
-    k = 0 if abs(n[0]) <= min(abs(n[1]), abs(n[2])) else (1 if abs(n[1]) <= abs(n[2]) else 2)
-    t = (1.0 - n[k] * n[0] if k == 0 else -n[k] * n[0],
-         1.0 - n[k] * n[1] if k == 1 else -n[k] * n[1],
-         1.0 - n[k] * n[2] if k == 2 else -n[k] * n[2])
-    norm = math.sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2])
-    e1 = (t[0] / norm, t[1] / norm, t[2] / norm)
-    e2 = (n[1] * e1[2] - n[2] * e1[1], n[2] * e1[0] - n[0] * e1[2], n[0] * e1[1] - n[1] * e1[0])
+    e1, e2 = plane_axes(n)
     _plane(Fa, ma, n, e1, e2, A, angle)
     _plane(Fb, mb, n, e1, e2, B, angle)
     found = _overlap_corners(A, ma, B, mb, COINCIDENT, eps, corners2)

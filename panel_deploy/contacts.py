@@ -94,11 +94,14 @@ def stowed_contacts(model: Model, pairs=None, reach: float = 0.0) -> tuple:
 
 
 def with_panel_contacts(model: Model, k_p: float, c_p: float, pairs=None,
-                        reach: float | None = 0.0) -> Model:
-    """``model`` with contacts of stiffness k_p (N/m) and damping c_p (N s/m)
-    between ``pairs`` (default ``model.collision_pairs``, the unhinged ones):
-    all of them for ``reach`` None, else those that touch in the stowed
-    stacks within ``reach`` (m, :func:`stowed_contacts`)."""
+                        reach: float | None = 0.0, mu_p: float = 0.0,
+                        friction_speed: float = 1.0e-3) -> Model:
+    """``model`` with contacts of stiffness k_p (N/m), damping c_p (N s/m)
+    and Coulomb friction coefficient mu_p, viscous below ``friction_speed``
+    (m/s), between ``pairs`` (default ``model.collision_pairs``, the
+    unhinged ones): all of them for ``reach`` None, else those that touch in
+    the stowed stacks within ``reach`` (m, :func:`stowed_contacts`)."""
     chosen = (tuple((int(a), int(b)) for a, b in (model.collision_pairs if pairs is None else pairs))
               if reach is None else stowed_contacts(model, pairs, reach))
-    return replace(model, contact_pairs=chosen, k_p=float(k_p), c_p=float(c_p))
+    return replace(model, contact_pairs=chosen, k_p=float(k_p), c_p=float(c_p), mu_p=float(mu_p),
+                   friction_speed=float(friction_speed))

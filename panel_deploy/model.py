@@ -246,6 +246,10 @@ class Model:
         panel contacts of :mod:`panel_deploy.contacts` (default: none).
     k_p, c_p : float
         Normal stiffness (N/m) and damping (N s/m) of a panel contact.
+    mu_p, friction_speed : float
+        Coulomb friction coefficient of a panel contact (0, default: none)
+        and the slip speed (m/s) below which its friction is viscous
+        (:func:`~panel_deploy.dynamics.kernels.panel_contacts`).
     stop_ramp : float
         Depth past a joint limit (rad) over which k_s and c_s come in
         smoothly (:func:`~panel_deploy.dynamics.kernels.stop_engagement`);
@@ -271,6 +275,8 @@ class Model:
     contact_pairs: tuple = ()
     k_p: float = 0.0
     c_p: float = 0.0
+    mu_p: float = 0.0
+    friction_speed: float = 1.0e-3
     stop_ramp: float = 0.0
 
     def __post_init__(self):

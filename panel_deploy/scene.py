@@ -369,6 +369,14 @@ class ContactSection:
                       "normal stiffness of one panel-to-panel contact pressed evenly")
     c_p: float = spec(280.0, number(0.0, 1e8, why=_WHY_STIFF), "N s/m",
                       "normal damping of one panel-to-panel contact")
+    friction: float = spec(0.0, number(0.0, 10.0, why="Coulomb coefficients of solids are below ~2"), "",
+                           "Coulomb friction coefficient of panel-to-panel contact (0: the panels "
+                           "slide freely, and the friction code is left out)")
+    friction_speed: float = spec(1.0e-3, number(0.0, 10.0, low_open=True, floor=1e-6,
+                                                why="slower, the friction is as stiff as the contact "
+                                                    "and the steps follow it"),
+                                 "m/s", "slip speed below which friction is viscous (its force "
+                                        "mu N v / sqrt(v^2 + friction_speed^2))")
     reach: Any = spec(None, optional(number(0.0, 100.0)), "m",
                       "only unhinged panels this close in the stowed stacks get a contact "
                       "(default: every unhinged pair)")

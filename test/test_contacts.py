@@ -220,6 +220,94 @@ def test_a_panel_dropped_on_another_bounces_back_with_its_energy():
     assert np.allclose(onset[6:9], [0.0, 0.0, 1.0], atol=1e-2)  # the face normal, g towards b
 
 
+def turning_panel(mu, k_hinge, pressed=1e-4, lever=0.2, k_p=850.0):
+    """Panel b (0.1 m square) pressed ``pressed`` m into the top face of the far
+    larger ground panel g, on a hinge normal to the faces ``lever`` m from its
+    centre with a spring of ``k_hinge`` N m/rad and no stop, no gravity: as b
+    turns, its bottom face's four corners slide on g's face, each pushed by
+    (k_p / 4)(pressed - D_r / 2). Returns the model, the push of one corner
+    (N), the corners' levers about the hinge (m) and b's inertia about it."""
+    size_g, size_b, m = np.array([1.0, 1.0, 0.005]), 2 * HALF, 0.02
+    g = Body("g", ((1, 1),), size_g, 1.0, box_inertia(1.0, size_g), np.zeros(3))
+    b = Body("b", ((1, 2),), size_b, m, box_inertia(m, size_b),
+             np.array([lever, 0.0, 0.5 * (size_g[2] + size_b[2]) - pressed]))
+    hinge = Hinge("h", 0, 1, np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.01, "top", k_hinge, 0.0, 0.0, ())
+    model = with_panel_contacts(Model.build([g, b], [hinge], 0), k_p, 0.0, pairs=[(0, 1)], reach=None,
+                                mu_p=mu)
+    push = k_p / FACE_POINTS * (pressed - kernels.CONTACT_RAMP / 2)
+    corners = np.array([[lever + x, y] for x in (-HALF[0], HALF[0]) for y in (-HALF[1], HALF[1])])
+    return model, push, np.hypot(*corners.T), box_inertia(m, size_b)[2, 2] + m * lever ** 2
+
+
+def test_friction_above_its_limit_takes_coulombs_amplitude_from_each_swing():
+    """Closed form of a spring and Coulomb friction: from rest at theta_0 the
+    panel turns back while the spring's torque exceeds the friction's, T_f =
+    mu N sum r, and stops at -(theta_0 - 2 T_f / k) (the friction's work
+    T_f |d theta| takes the spring's energy); the energy balance holds."""
+    mu, k_hinge, theta0 = 0.3, 0.1, 0.2
+    model, push, levers, _ = turning_panel(mu, k_hinge)
+    T_f = mu * push * levers.sum()
+    assert 0.2 < T_f / (k_hinge * theta0) < 0.3  # slides, and loses a good part of each swing
+    state = State.stowed(model)
+    state.theta[:] = theta0
+    settings = SimulationSection(t_end=0.35, samples=3501, method="DOP853", rtol=1e-9, atol=1e-12)
+    result = simulate(model, settings, state)
+    assert result.success, result.message
+    theta = result.theta[:, 0]
+    turn = np.flatnonzero(np.diff(theta) > 0)[0]  # the first turning point
+    assert theta[turn] == pytest.approx(-(theta0 - 2 * T_f / k_hinge), rel=2e-3)
+    total = sum(result.energy[k] for k in ("kinetic", "spring", "dissipated"))
+    assert np.ptp(total) < 1e-6 * total[0]
+    assert result.energy["dissipated"][turn] == pytest.approx(T_f * (theta0 - theta[turn]), rel=2e-3)
+    frictionless = simulate(turning_panel(0.0, k_hinge)[0], settings, state)
+    assert frictionless.theta[:, 0].min() < -0.999 * theta0  # without it the swing keeps its amplitude
+
+
+def test_friction_below_its_limit_holds_the_panel_to_a_creep():
+    """Where the spring's torque is a twelfth of T_f the panel sticks, but for
+    the regularisation: each corner slips at omega r << v_f, where the friction
+    is a damper mu N / v_f, so theta relaxes as exp(-k v_f t / (mu N sum r^2))."""
+    mu, k_hinge, theta0, v_f = 0.3, 0.002, 0.2, 1e-3
+    model, push, levers, _ = turning_panel(mu, k_hinge)
+    assert mu * push * levers.sum() > 10 * k_hinge * theta0
+    state = State.stowed(model)
+    state.theta[:] = theta0
+    settings = SimulationSection(t_end=1.0, samples=11, method="DOP853", rtol=1e-10, atol=1e-14)
+    result = simulate(model, settings, state)
+    assert result.success, result.message
+    rate = k_hinge * v_f / (mu * push * (levers ** 2).sum())
+    assert theta0 - result.theta[-1, 0] == pytest.approx(theta0 * -math.expm1(-rate), rel=1e-2)
+    assert np.abs(result.omega[1:, 0] * levers.max()).max() < 0.1 * v_f  # a creep, well below v_f
+
+
+def test_the_stiff_jacobian_holds_the_frictions_damping_at_zero_slip():
+    """The W of ROS34PW2 gets the friction as a damper mu N / v_f along the two
+    slip directions of each point: B is the right-hand side's slope in omega
+    at rest, which the frictionless model does not have."""
+    for mu in (0.3, 0.0):
+        P = pack(turning_panel(mu, 0.1)[0])
+        delta = 1e-6  # rad/s: the corners slip at ~2.5e-7 m/s, far below v_f
+        rate = [kernels.rhs(P, np.array([0.2, w, 0.0, 0.0]), new_list(P))[1] for w in (-delta, delta)]
+        slope = (rate[1] - rate[0]) / (2 * delta)
+        A, B, ok = kernels.stiff_jacobian(P, np.array([0.2, 0.0, 0.0, 0.0]), new_list(P))
+        assert ok
+        assert B[0, 0] == pytest.approx(slope, rel=1e-6)
+        assert (slope < -1e3) == (mu > 0)
+
+
+def test_friction_is_exported_to_mujoco_as_sliding_friction():
+    """The MJCF pair (of the panels touching, not pressed, when stowed: the
+    export's rule) gets condim 3 and mu on both sliding directions, and MuJoCo
+    loads it; without friction it stays frictionless."""
+    for mu, condim in ((0.3, "3"), (0.0, "1")):
+        xml = export_mjcf(turning_panel(mu, 0.1, pressed=0.0)[0])
+        pair = next(line for line in xml.splitlines() if "<pair " in line)
+        assert f'condim="{condim}"' in pair
+        assert ('friction="0.3 0.3' in pair) == (mu > 0)
+    mujoco = pytest.importorskip("mujoco")
+    assert mujoco.MjModel.from_xml_string(export_mjcf(turning_panel(0.3, 0.1, pressed=0.0)[0])).npair == 1
+
+
 @pytest.fixture(scope="module")
 def six_by_six():
     """6 x 6, its first packing circuit, over 0.08 s with and without contact:

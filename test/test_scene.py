@@ -5,6 +5,7 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from panel_deploy.cli import main
@@ -103,6 +104,13 @@ def test_defaults_and_density():
     ("air.viscosity", 1.8e-5, "air.viscosity: unknown key (expected one of density, "
                               "drag_coefficient)"),
     ("air", 1.2, "air: expected a mapping"),
+    # panel friction
+    ("contact.friction", -0.3, "contact.friction: expected a number >= 0, got -0.3"),
+    ("contact.friction", 30, "contact.friction: expected a number <= 10, got 30 (limit: Coulomb"),
+    ("contact.friction", "dry", "contact.friction: expected a number, got str"),
+    ("contact.friction_speed", 0, "contact.friction_speed: expected a number > 0, got 0"),
+    ("contact.friction_speed", 1e-9, "contact.friction_speed: expected a number >= 1e-06, got 1e-09"),
+    ("contact.friction_speed", float("inf"), "contact.friction_speed: expected a finite number"),
     ("velocity", 3, "velocity: unknown section"),
 ])
 def test_bad_values_name_the_key(path, value, expected):
@@ -135,6 +143,19 @@ def test_air_is_off_by_default_and_reaches_the_model():
     air = build_model(scene_from_dict(with_("air.density", 1.2))).air
     assert (air.density, air.drag_coefficient) == (1.2, 1.17)
     assert "air.density" in describe_schema() and "air.drag_coefficient" in describe_schema()
+
+
+def test_friction_is_off_by_default_and_reaches_the_model():
+    from panel_deploy.build import build_model
+    from panel_deploy.dynamics.pack import pack
+    s = scene_from_dict(MINIMAL)
+    assert (s.contact.friction, s.contact.friction_speed) == (0.0, 1e-3)
+    sets = with_("contact.friction", 0.4)
+    sets["contact"]["friction_speed"] = 0.002
+    model = build_model(scene_from_dict(sets))
+    assert (model.mu_p, model.friction_speed) == (0.4, 0.002)
+    assert model.contact_pairs and np.all(pack(model).contact[:, 10:] == [0.4, 0.002])
+    assert "contact.friction" in describe_schema() and "contact.friction_speed" in describe_schema()
 
 
 def test_cli_bad_air_is_one_line_before_any_work(capsys):

@@ -48,6 +48,7 @@ from numba import njit
 
 from .._numba_cache import announce_compilation
 from ..boxes import contact as contact_of_boxes
+from ..boxes import plane_axes
 from ..boxes import scratch as box_scratch
 from ..boxes import separating_axis
 from . import articulated
@@ -1028,6 +1029,8 @@ def panel_contacts(P, contact, R, p, w, vo, f, near):
     in over the first ``CONTACT_RAMP`` of depth (:func:`_contact_law`). The
     spring stores its energy; the rest of the push's work, (push - spring) s
     >= 0, is dissipated (s is d's rate up to the motion of the point).
+    With a friction coefficient mu (``contact[r, 10]``) > 0, the point's
+    :func:`_friction` opposes the slip, and dissipates all its work.
     ``contact`` is ``P.contact``, passed apart so numba prunes this for None;
     ``near`` the run's candidate list (:func:`near_pairs`).
     """
@@ -1040,18 +1043,38 @@ def panel_contacts(P, contact, R, p, w, vo, f, near):
     for r in _touching(P, contact, R, p, near):
         count, normal = _pair_points(P, contact, r, R, p, work)
         a, b = int(contact[r, 0]), int(contact[r, 1])
-        k, c = contact[r, 8], contact[r, 9]
+        k, c, mu, v_f = contact[r, 8], contact[r, 9], contact[r, 10], contact[r, 11]
         for q in range(count):
             depth = depths[q]
             x = (points[q, 0], points[q, 1], points[q, 2])
-            speed = _dot(normal, _sub(_point_velocity(w, vo, a, x), _point_velocity(w, vo, b, x)))
+            relative = _sub(_point_velocity(w, vo, a, x), _point_velocity(w, vo, b, x))
+            speed = _dot(normal, relative)
             push, spring, e, _, _ = _contact_law(depth, speed, k, c)
             energy += e
             power += (push - spring) * speed
-
-            _add_wrench(f, a, ZERO3, _scale(normal, push), x)
-            _add_wrench(f, b, ZERO3, _scale(normal, -push), x)
+            force = _scale(normal, push)  # on b, as the friction: f holds minus the force on a
+            if mu > 0.0:
+                friction, loss = _friction(_sub(relative, _scale(normal, speed)), mu * push, v_f)
+                force = _add(force, friction)
+                power += loss
+            _add_wrench(f, a, ZERO3, force, x)
+            _add_wrench(f, b, ZERO3, _scale(force, -1.0), x)
     return energy, power
+
+
+@njit(cache=True, inline='always')
+def _friction(slip, limit, v_f):
+    """Regularised Coulomb friction at a contact point slipping at ``slip``
+    (3-tuple, m/s: the first body's point relative to the second's, in the
+    contact plane) under a normal push of mu times ``limit`` (N): the force
+    on the second body, ``limit slip / sqrt(|slip|^2 + v_f^2)`` (N), and the
+    power it dissipates (W). Below the slip speed v_f (m/s) it is a damper
+    of ``limit / v_f`` (N s/m), so that sticking is a slow creep and the
+    force is smooth: Coulomb's law jumps at zero slip, and a step that
+    crosses it errs by O(h)."""
+    v2 = _dot(slip, slip)
+    scale = limit / math.sqrt(v2 + v_f * v_f)
+    return _scale(slip, scale), scale * v2
 
 
 @njit(cache=True)
@@ -1323,25 +1346,55 @@ def _pressed_points(P, contact, R, p, near):
 
 
 @njit(cache=True)
+def _contact_row_count(contact, pressed):
+    """Rows of U that :func:`_contact_rows` writes: one per pressed point, two
+    more where its pair has friction."""
+    if contact is None:
+        return 0
+    count, rows = pressed
+    out = count
+    for i in range(count):
+        if contact[int(rows[i, 0]), 10] > 0.0:
+            out += 2
+    return out
+
+
+@njit(cache=True)
 def _contact_rows(P, contact, pressed, S, U, kk, cc, start):
     """Write from row ``start`` of U, kk, cc the pressed panel contact points
     (:func:`_pressed_points`' (count, rows)): G, the row of -d(depth)/d theta,
     and the stiffness and damping of :func:`_contact_law` at its depth, so that K
-    gains ``k G^T G`` (C likewise)."""
+    gains ``k G^T G`` (C likewise); then, for a point with friction, its two
+    slip directions with :func:`_friction`'s damping at zero slip, mu times
+    the spring's push over the friction speed."""
     if contact is None:
         return
     count, rows = pressed
     Jp = np.empty((3, P.n))
+    extra = start + count
     for i in range(count):
         r = int(rows[i, 0])
-        _, _, _, k, c = _contact_law(rows[i, 7], 0.0, contact[r, 8], contact[r, 9])
+        push, _, _, k, c = _contact_law(rows[i, 7], 0.0, contact[r, 8], contact[r, 9])
         kk[start + i], cc[start + i] = k, c
         x = (rows[i, 4], rows[i, 5], rows[i, 6])
         Jp[:] = 0.0
         _point_jacobian(P, S, int(contact[r, 1]), x, Jp, 0, 1.0)
         _point_jacobian(P, S, int(contact[r, 0]), x, Jp, 0, -1.0)
-        for col in range(P.n):
-            U[start + i, col] = rows[i, 1] * Jp[0, col] + rows[i, 2] * Jp[1, col] + rows[i, 3] * Jp[2, col]
+        normal = (rows[i, 1], rows[i, 2], rows[i, 3])
+        _direction_row(P, Jp, normal, U[start + i])
+        if contact[r, 10] > 0.0:
+            for e in plane_axes(normal):
+                _direction_row(P, Jp, e, U[extra])
+                kk[extra], cc[extra] = 0.0, contact[r, 10] * push / contact[r, 11]
+                extra += 1
+
+
+@njit(cache=True, inline='always')
+def _direction_row(P, Jp, e, out):
+    """Write ``e . Jp`` (n,) to out: the rate along the unit vector e
+    (3-tuple) of the relative point velocity whose Jacobian is Jp (3, n)."""
+    for col in range(P.n):
+        out[col] = e[0] * Jp[0, col] + e[1] * Jp[1, col] + e[2] * Jp[2, col]
 
 
 @njit(cache=True, inline='always')
@@ -1363,9 +1416,10 @@ def stiff_terms(P, y, near):
     row of U per cut hinge, its angle Jacobian (its own spring and contact),
     and for PENALTY five per cut hinge, the closure Jacobian of Eq. (5) with
     weights k_M, k_M, k_M, k_N, k_N (c likewise); then one per panel contact
-    point pressed now (:func:`_contact_rows`). Returns (kin, Kd, Cd, U, kk,
-    cc), kin the :func:`kinematics` tuple; U is (r, n), r = 6 m (PENALTY) or
-    m plus the pressed contact points, so K, C are diagonal plus rank r.
+    point pressed now and two more where it has friction (:func:`_contact_rows`).
+    Returns (kin, Kd, Cd, U, kk, cc), kin the :func:`kinematics` tuple; U is
+    (r, n), r = 6 m (PENALTY) or m plus the contact rows, so K, C are
+    diagonal plus rank r.
     """
     n = P.n
     theta = y[:n]
@@ -1380,7 +1434,7 @@ def stiff_terms(P, y, near):
     m = P.cut_a.shape[0]
     closure = 6 * m if P.method == PENALTY else m
     pressed = _pressed_points(P, P.contact, R, p, near)
-    rows = closure + pressed[0]
+    rows = closure + _contact_row_count(P.contact, pressed)
     U = np.zeros((rows, n))
     kk = np.empty(rows)
     cc = np.empty(rows)

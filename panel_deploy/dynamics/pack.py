@@ -69,11 +69,12 @@ class Packed(NamedTuple):
         cost a run without air 5-9 % in speed).
     half : (n + 1, 3) float
         Half sizes of each body's box along its own axes, m (ground last).
-    contact : (q, 10) float, or None without panel contacts
+    contact : (q, 12) float, or None without panel contacts
         One row per pair of :attr:`Model.contact_pairs`: its bodies (kernel
-        indices, as floats), their half edges (m, 3 + 3), and the stiffness
+        indices, as floats), their half edges (m, 3 + 3), the stiffness
         (N/m) and damping (N s/m) of each of its contact points, a quarter of
-        k_p and c_p (a face pressed evenly has four). None, like ``air``, so
+        k_p and c_p (a face pressed evenly has four), and its friction
+        coefficient mu_p and friction speed (m/s). None, like ``air``, so
         that numba leaves the contact code out.
     """
 
@@ -133,7 +134,8 @@ def _contact_rows(model: Model, index: dict) -> np.ndarray | None:
     a, b = np.array(model.contact_pairs).T
     half = 0.5 * np.array([body.size for body in model.bodies])
     kernel = np.array([index[i] for i in range(len(model.bodies))])
-    k = np.full((len(a), 2), [model.k_p / FACE_POINTS, model.c_p / FACE_POINTS])
+    k = np.full((len(a), 4), [model.k_p / FACE_POINTS, model.c_p / FACE_POINTS, model.mu_p,
+                              model.friction_speed])
     return np.column_stack([kernel[a], kernel[b], half[a], half[b], k]).astype(float)
 
 

@@ -27,8 +27,9 @@ The MJCF model is the same multibody system, written so that MuJoCo's
   the inertia changes. MuJoCo limits only push, while the paper's damper
   also pulls while a hinge leaves the limit.
 * Panel contacts (``Model.contact_pairs``, the unhinged panels touching in
-  the stowed stacks) are frictionless (``condim="1"``) contact pairs of the
-  two box geoms, with (k_p, c_p) mapped to direct stiffness and damping by
+  the stowed stacks) are contact pairs of the two box geoms, frictionless
+  (``condim="1"``) or with sliding friction mu_p (``condim="3"``; MuJoCo's
+  friction sticks, ours creeps below ``friction_speed``), with (k_p, c_p) mapped to direct stiffness and damping by
   the same rule, the inverse effective mass of the relative motion along
   the contact normal at the middle of the touching region, stowed state.
   MuJoCo's box-box collider makes up to 8 contact points of a pair, each
@@ -323,10 +324,13 @@ def _document(model: Model, timestep: float, integrator: str) -> str:
         lines.append("  </actuator>")
     if model.contact_pairs:
         lines.append("  <contact>")
+        # MuJoCo's sliding friction (its pyramid's two directions; spin and roll at its defaults)
+        friction = (f'condim="3" friction="{_f(model.mu_p)} {_f(model.mu_p)} 0.005 0.0001 0.0001" '
+                    if model.mu_p > 0 else 'condim="1" ')
         for a, b in model.contact_pairs:
             K, B = solref[("contact", a, b)]
             lines.append(f"    <pair geom1={_name(model.bodies[a].name)} geom2={_name(model.bodies[b].name)} "
-                         f'condim="1" solref="{_f(-K)} {_f(-B)}" solimp={imp}/>')
+                         f'{friction}solref="{_f(-K)} {_f(-B)}" solimp={imp}/>')
         lines.append("  </contact>")
     qpos = np.empty(model.n_coords)
     qpos[qpos_index(model)] = model.theta_stowed

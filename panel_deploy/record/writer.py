@@ -272,7 +272,8 @@ def _relative(source) -> str:
 
 def model_record(model) -> dict:
     """The ``model`` metadata record: k and c of one spring per hinge (model
-    order), springs per hinge, joint-stop contact, closure, gravity and air."""
+    order), springs per hinge, joint-stop contact, closure, gravity, air and
+    panel contact."""
     c = model.closure
     return {"hinges": [h.name for h in model.hinges],
             "stiffness": [float(h.k) for h in model.hinges],           # N m/rad, one spring
@@ -281,7 +282,9 @@ def model_record(model) -> dict:
             "k_s": float(model.k_s), "c_s": float(model.c_s), "stop_ramp": float(model.stop_ramp),
             "closure": c.method, "k_M": c.k_M, "c_M": c.c_M, "k_N": c.k_N, "c_N": c.c_N,
             "gravity": [float(g) for g in model.gravity],
-            "air_density": model.air.density, "drag_coefficient": model.air.drag_coefficient}
+            "air_density": model.air.density, "drag_coefficient": model.air.drag_coefficient,
+            "panel_contacts": len(model.contact_pairs), "k_p": model.k_p, "c_p": model.c_p,
+            "friction": model.mu_p, "friction_speed": model.friction_speed}
 
 
 def integrator_record(scene) -> dict:

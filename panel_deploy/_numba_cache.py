@@ -22,6 +22,10 @@ changed: in a checkout, an edited right-hand side would leave the compiled
 loops running the old one. This package's locators stamp each of its kernels with
 :func:`kernel_sources_stamp`, a hash of every file in
 :data:`KERNEL_SOURCES`: any change to one recompiles them all on first use.
+A process given numba's own locators (``NUMBA_CACHE_LOCATOR_CLASSES``, which
+:func:`configure` leaves alone) stamps the kernels numba's way; where it
+shares their folder, each side finds the other's stamp stale and compiles
+once more.
 
 This has to happen before the first ``@njit(cache=True)`` is decorated,
 since numba picks a function's cache folder then: ``panel_deploy/__init__``

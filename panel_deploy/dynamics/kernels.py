@@ -1392,7 +1392,8 @@ def _contact_rows(P, contact, pressed, S, U, kk, cc, start):
 @njit(cache=True, inline='always')
 def _direction_row(P, Jp, e, out):
     """Write ``e . Jp`` (n,) to out: the rate along the unit vector e
-    (3-tuple) of the relative point velocity whose Jacobian is Jp (3, n)."""
+    (3-tuple) of the relative velocity (of a point, or angular) whose
+    Jacobian is Jp (3, n)."""
     for col in range(P.n):
         out[col] = e[0] * Jp[0, col] + e[1] * Jp[1, col] + e[2] * Jp[2, col]
 
@@ -1445,8 +1446,7 @@ def stiff_terms(P, y, near):
         Jw[:] = 0.0
         _angular_jacobian(P, S, P.cut_b[j], Jw, 0, 1.0)
         _angular_jacobian(P, S, P.cut_a[j], Jw, 0, -1.0)
-        for col in range(n):
-            U[j, col] = g[0] * Jw[0, col] + g[1] * Jw[1, col] + g[2] * Jw[2, col]
+        _direction_row(P, Jw, g, U[j])
         share = _stop_share(P, th)
         kk[j] = P.cut_k[j] + P.k_s * share
         cc[j] = P.cut_c[j] + P.c_s * share

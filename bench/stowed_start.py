@@ -1,0 +1,79 @@
+"""What the stowed start costs of a larger array's deployment (issue 33).
+
+    python bench/stowed_start.py [--sizes 6 8 10] [--repeats 3] [--start 0.002]
+                                 [--out bench/results/stowed_start.txt]
+
+The first packing circuit of each R x R array, as ``bench_scaling.py`` runs it
+(exact closure, ramped stops, panel contact, the scene's tolerances), over its
+first ``--start`` seconds and over the whole window (0.2 s): wall time (median
+of ``--repeats``), accepted steps, right-hand-side evaluations and, for the
+DOPRI5 loop, the attempts its error test rejected ((evaluations - 1) / 6 less
+the steps; a step cut short onto a contact switch counts as rejected here).
+The share of the window's wall time that its start takes says how much the
+stowed stacks cost: there the pressed pairs make each evaluation dear, and
+the jumps of their force (docs/findings.md 5, "The stowed start of 10 x 10")
+reject nearly half of the attempts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from bench_scaling import ROOT, STOP_RAMP, scene_of
+from panel_deploy.build import build_model
+from panel_deploy.dynamics import simulate
+
+WINDOW = 0.2  # s, bench_scaling's window for the larger arrays
+DOPRI5_STAGES = 6  # evaluations of one attempt of the compiled DOPRI5 loop (FSAL)
+
+
+def timed(model, settings, repeats):
+    """(median wall s, last result) of ``repeats`` runs of ``settings``."""
+    walls = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        result = simulate(model, settings)
+        walls.append(time.perf_counter() - t0)
+    return statistics.median(walls), result
+
+
+def rejected(result) -> str:
+    """The rejected attempts of a DOPRI5 run, else "-" (other schemes count otherwise)."""
+    if result.scheme != "dopri5":
+        return "-"
+    return str((result.nfev - 1) // DOPRI5_STAGES - result.nsteps)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[6, 8, 10], metavar="R")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--start", type=float, default=0.002, metavar="S")
+    ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "stowed_start.txt")
+    args = ap.parse_args(argv)
+    lines = [f"stowed_start: first packing circuits, exact closure, stops ramped over {STOP_RAMP} rad, "
+             f"the scene's tolerances; medians of {args.repeats} runs, 2 shared cores",
+             "",
+             f"{'scene':<20} {'window':>7} {'wall s':>7} {'steps':>6} {'evals':>6} {'rejected':>8} "
+             f"{'us/eval':>7} {'share':>6}"]
+    print("\n".join(lines), flush=True)
+    for size in args.sizes:
+        scene, label = scene_of(size, size, WINDOW, "exact", STOP_RAMP)
+        model = build_model(scene)
+        simulate(model, replace(scene.simulation, t_end=1e-5, samples=2))  # loads the kernels
+        whole = timed(model, scene.simulation, args.repeats)
+        start = timed(model, replace(scene.simulation, t_end=args.start, samples=2), args.repeats)
+        for window, (wall, result) in ((args.start, start), (WINDOW, whole)):
+            line = (f"{label:<20} {window:>7g} {wall:>7.3f} {result.nsteps:>6} {result.nfev:>6} "
+                    f"{rejected(result):>8} {1e6 * wall / result.nfev:>7.0f} {wall / whole[0]:>6.0%}")
+            lines.append(line)
+            print(line, flush=True)
+    args.out.write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()

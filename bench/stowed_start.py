@@ -18,27 +18,16 @@ reject nearly half of the attempts.
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 from dataclasses import replace
 from pathlib import Path
 
+from bench_fold import timed
 from bench_scaling import ROOT, STOP_RAMP, scene_of
 from panel_deploy.build import build_model
 from panel_deploy.dynamics import simulate
 
 WINDOW = 0.2  # s, bench_scaling's window for the larger arrays
 DOPRI5_STAGES = 6  # evaluations of one attempt of the compiled DOPRI5 loop (FSAL)
-
-
-def timed(model, settings, repeats):
-    """(median wall s, last result) of ``repeats`` runs of ``settings``."""
-    walls = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        result = simulate(model, settings)
-        walls.append(time.perf_counter() - t0)
-    return statistics.median(walls), result
 
 
 def rejected(result) -> str:
@@ -65,8 +54,9 @@ def main(argv=None):
         scene, label = scene_of(size, size, WINDOW, "exact", STOP_RAMP)
         model = build_model(scene)
         simulate(model, replace(scene.simulation, t_end=1e-5, samples=2))  # loads the kernels
-        whole = timed(model, scene.simulation, args.repeats)
-        start = timed(model, replace(scene.simulation, t_end=args.start, samples=2), args.repeats)
+        start_settings = replace(scene.simulation, t_end=args.start, samples=2)
+        whole = timed(lambda: simulate(model, scene.simulation), args.repeats)
+        start = timed(lambda: simulate(model, start_settings), args.repeats)
         for window, (wall, result) in ((args.start, start), (WINDOW, whole)):
             line = (f"{label:<20} {window:>7g} {wall:>7.3f} {result.nsteps:>6} {result.nfev:>6} "
                     f"{rejected(result):>8} {1e6 * wall / result.nfev:>7.0f} {wall / whole[0]:>6.0%}")

@@ -48,6 +48,18 @@ from .model import Model
 TOUCHING = 1e-9
 
 
+def aligned_overlap(model: Model, R, p, a: int, b: int):
+    """The intersection (lo, hi), m, of bodies a and b as axis-aligned boxes in
+    poses (R, p) that keep every body axis along a frame axis; ``lo > hi``
+    along a direction in which they are apart."""
+    lo, hi = [], []
+    for i in (a, b):
+        half = np.abs(R[i]) @ (0.5 * model.bodies[i].size)
+        lo.append(p[i] - half)
+        hi.append(p[i] + half)
+    return np.maximum(lo[0], lo[1]), np.minimum(hi[0], hi[1])
+
+
 def touching_region(model: Model, R, p, a: int, b: int, reach: float = 0.0):
     """Where bodies a and b touch in poses (R, p) that keep every body axis
     along a frame axis (stowed, flat: each body is then its own axis-aligned
@@ -55,12 +67,7 @@ def touching_region(model: Model, R, p, a: int, b: int, reach: float = 0.0):
     contact; None if they are further apart than ``reach`` (m) or
     interpenetrate. Boxes apart by at most ``reach`` give the (inverted,
     ``lo > hi`` along the gap) box between them."""
-    lo, hi = [], []
-    for i in (a, b):
-        half = np.abs(R[i]) @ (0.5 * model.bodies[i].size)
-        lo.append(p[i] - half)
-        hi.append(p[i] + half)
-    low, high = np.maximum(lo[0], lo[1]), np.minimum(hi[0], hi[1])
+    low, high = aligned_overlap(model, R, p, a, b)
     gap = high - low
     if np.linalg.norm(np.minimum(gap, 0.0)) > reach + TOUCHING or not np.any(gap <= TOUCHING):
         return None

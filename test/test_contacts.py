@@ -415,6 +415,80 @@ def deepest_interference(model, theta) -> float:
     return worst
 
 
+def lying_panel(mu, k_turn, lever=0.2, lowered=0.0):
+    """Panel b (0.1 m square, 20 g) lying on the far larger ground panel g,
+    carried by two hinges through a 1 g link: ``turn`` normal to the faces
+    (spring ``k_turn`` N m/rad) and ``tilt`` along g's top face, both through
+    the point ``lever`` m from b's centre, with no spring. Earth's gravity
+    presses b onto g through the tilt, so the push N on b's face is set by
+    the moments about the tilt, sum N_i x_i = m g lever, whatever the
+    contact's compliance; b's face is ``lowered`` m into g when stowed."""
+    size_g, size_b, m, size_l = np.array([1.0, 1.0, 0.005]), 2 * HALF, 0.02, np.full(3, 0.01)
+    top = 0.5 * size_g[2]
+    g = Body("g", ((1, 1),), size_g, 1.0, box_inertia(1.0, size_g), np.zeros(3))
+    link = Body("link", ((1, 2),), size_l, 1e-3, box_inertia(1e-3, size_l), np.array([0.0, 0.0, top + 0.02]))
+    b = Body("b", ((1, 3),), size_b, m, box_inertia(m, size_b), np.array([lever, 0.0, top + HALF[2] - lowered]))
+    hinge = np.array([0.0, 0.0, top])
+    hinges = [Hinge("turn", 0, 1, hinge, np.array([0.0, 0.0, 1.0]), 0.01, "top", k_turn, 0.0, 0.0, ()),
+              Hinge("tilt", 1, 2, hinge, np.array([0.0, 1.0, 0.0]), 0.01, "top", 0.0, 0.0, 0.0, ())]
+    model = Model.build([g, link, b], hinges, 0, gravity=(0.0, 0.0, -9.81))
+    return with_panel_contacts(model, 850.0, 4.0, pairs=[(0, 2)], reach=None, mu_p=mu)
+
+
+def test_mujoco_loses_the_same_swing_to_friction_as_ours():
+    """The lying panel turned 0.2 rad on its spring and let go, ours and
+    MuJoCo on the export (box-box contact, pyramidal Coulomb friction). The
+    push on b's face has moment m g lever about the tilt, so the friction's
+    torque about the turn, sum mu N_i r_i, lies between mu m g lever times the
+    least and the largest r/x of b's face (x along the lever, r from the
+    turn's axis): the first turning point -(theta_0 - 2 T_f / k) lies in that
+    bracket for both, whichever way each spreads the push over the face; the
+    two agree to 2 % of the swing the friction takes; without friction
+    both keep the amplitude."""
+    mujoco = pytest.importorskip("mujoco")
+    from panel_deploy.bench.mujoco_peer import run_mujoco
+
+    theta0, k_turn, lever = 0.2, 0.24, 0.2
+    x, y = lever + np.array([-HALF[0], HALF[0]]), HALF[1]
+    ratio = np.hypot(x, y) / x  # r / x at b's near and far edges
+    bracket = 0.3 * 0.02 * 9.81 * lever * ratio
+    settings = SimulationSection(t_end=0.3, samples=301, method="DOP853", rtol=1e-9, atol=1e-12)
+    first_turn = {}
+    for mu in (0.3, 0.0):
+        model = lying_panel(mu, k_turn, lever)
+        assert ('condim="3"' in export_mjcf(model)) == (mu > 0)
+        state = State.stowed(model)
+        state.theta[0] = theta0
+        ours = simulate(model, settings, state)
+        assert ours.success, ours.message
+        peer = run_mujoco(model, settings.t_end, settings.samples, 1e-4, theta0=state.theta)
+        assert peer.success, peer.message
+        for name, theta in (("ours", ours.theta[:, 0]), ("mujoco", peer.theta[:, 0])):
+            turn = np.flatnonzero(np.diff(theta) > 0)
+            first_turn[name, mu] = theta[turn[0]] if len(turn) else theta.min()
+    low, high = np.sort(-(theta0 - 2 * bracket / k_turn))
+    loss = theta0 + first_turn["ours", 0.3]
+    # MuJoCo's pyramid of 4 directions stands for the friction's circle: 0.5 % slack
+    slack = 0.005 * loss
+    for name in ("ours", "mujoco"):
+        assert low - slack < first_turn[name, 0.3] < high + slack, (name, first_turn, low, high)
+        assert first_turn[name, 0.0] < -0.999 * theta0
+    assert abs(first_turn["ours", 0.3] - first_turn["mujoco", 0.3]) < 0.02 * loss, first_turn
+    assert mujoco.MjModel.from_xml_string(export_mjcf(lying_panel(0.3, k_turn, lever))).npair == 1
+
+
+def test_a_pair_pressed_when_stowed_exports_its_contact_along_the_least_overlap():
+    """A contact pair that already interpenetrates when stowed (b lowered
+    0.1 mm into g) exports with the normal of its least overlap, g's face,
+    and nearly the solref of the touching pair."""
+    def solref(xml):
+        pair = next(line for line in xml.splitlines() if "<pair " in line)
+        return np.array(pair.split('solref="')[1].split('"')[0].split(), dtype=float)
+    touching, pressed = (solref(export_mjcf(lying_panel(0.3, 0.24, lowered=d))) for d in (0.0, 1e-4))
+    assert pressed == pytest.approx(touching, rel=1e-2)
+    assert np.all(pressed < 0)
+
+
 def test_mujoco_box_contacts_on_the_export_hold_the_stacks_as_ours_do(six_by_six):
     """MuJoCo on the exported model, its box-box collider on the contact pairs:
     without them its stacks interpenetrate by millimetres as ours do; with

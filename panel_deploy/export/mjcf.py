@@ -79,7 +79,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from ..errors import ModelError
-from ..contacts import TOUCHING, touching_region
+from ..contacts import TOUCHING, aligned_overlap, touching_region
 from ..kinematics import forward_kinematics
 from ..model import Model
 
@@ -192,11 +192,16 @@ def solref_parameters(model: Model) -> dict:
             out[("connect", h_index, end)] = (a * k, a * c)
     R, p = forward_kinematics(model, theta)
     for a, b in model.contact_pairs:
-        lo, hi = touching_region(model, R, p, a, b, math.inf)  # a contact pair: it is near
+        region = touching_region(model, R, p, a, b, math.inf)  # a contact pair: it is near
+        if region is None:  # pressed into each other when stowed: normal along the least overlap
+            lo, hi = aligned_overlap(model, R, p, a, b)
+            normals = np.eye(3)[[np.argmin(hi - lo)]]
+        else:
+            lo, hi = region
+            normals = np.eye(3)[hi - lo <= TOUCHING]
         point = 0.5 * (lo + hi)
         J = (_point_jacobian(model, theta, Jv, Jw, b, _flat(model, R, p, b, point))
              - _point_jacobian(model, theta, Jv, Jw, a, _flat(model, R, p, a, point)))
-        normals = np.eye(3)[hi - lo <= TOUCHING]
         inverse_mass = float(np.mean([n @ J @ Minv @ J.T @ n for n in normals]))
         out[("contact", a, b)] = (inverse_mass * model.k_p, inverse_mass * model.c_p)
     return out

@@ -30,9 +30,12 @@ Per scene (medians of ``--repeats`` runs, wall clock, 2 shared cores):
   the median time per sample of :meth:`TrajectoryCheck.update` over all
   repeats (at least ``--repeats``, and enough for ``MIN_SAMPLES`` samples),
   with the between-sample screen off ("before", ``prune=False``: every
-  pair's speed bound on every interval) and on ("after"), the two checks
-  fed the same samples in turn, and the median of their per-sample ratios;
-  their results are compared (first collision, t, v, d, D_j);
+  pair's speed bound on every interval) and on ("after"), and with the
+  speed bound alone ("1st ord", ``second_order=False``: no second-order
+  bound before a pair is bisected), the checks fed the same samples in
+  turn, the median of their per-sample ratios to "after", and the bisection
+  steps with and without the second-order bound; their results are
+  compared (first collision, t, v, d, D_j);
 - the paper's D_j alone (refinement off) per sample, over the whole window;
 - P, the body pairs checked, and how many got an exact distance per sample.
 
@@ -157,15 +160,18 @@ def measure(rows, cols, t_end, repeats, closure, stop_ramp):
     result = runs[0]
     wall = statistics.median(r.wall_time for r in runs)
     collisions = [CollisionSettings.from_scene(scene, prune=prune) for prune in (False, True)]
+    collisions.append(replace(collisions[1], second_order=False))
     checked = len(lockstep(model, result, collisions)[0][1])  # and compile / warm up
-    setup, before, after, ratio = [], [], [], []
+    setup, before, after, first, ratio, first_ratio = [], [], [], [], [], []
     # A check is cheap next to the simulation: enough repeats for MIN_SAMPLES timed samples.
     for _ in range(max(repeats, math.ceil(MIN_SAMPLES / checked))):
-        (_, t_off, off), (s_on, t_on, on) = lockstep(model, result, collisions)
+        (_, t_off, off), (s_on, t_on, on), (_, t_first, first_order) = lockstep(model, result, collisions)
         setup.append(s_on)
         before += t_off
         after += t_on
+        first += t_first
         ratio += [x / y for x, y in zip(t_off, t_on)]
+        first_ratio += [x / y for x, y in zip(t_first, t_on)]
     refine_off = CollisionSettings.from_scene(scene, refine=False)
     dj = statistics.median(d_j_per_sample(model, result, refine_off) for _ in range(repeats))
     report = on.report()
@@ -180,7 +186,9 @@ def measure(rows, cols, t_end, repeats, closure, stop_ramp):
         t_end=t_end, steps=result.nsteps, sim_per_s=wall / result.t[-1], per_step=wall / result.nsteps,
         cpu_step=statistics.median(cpu) / result.nsteps,
         setup=statistics.median(setup), before=statistics.median(before), after=statistics.median(after),
-        ratio=statistics.median(ratio), dj=dj,
+        ratio=statistics.median(ratio), dj=dj, first=statistics.median(first),
+        first_ratio=statistics.median(first_ratio), first_same=same(first_order, on),
+        bisections=(first_order.report().counters["refine_evaluations"], report.counters["refine_evaluations"]),
         exact=report.counters["exact_pairs"] / report.counters["samples"], checked=report.counters["samples"],
         identical=same(off, on),
         contacts=len(model.contact_pairs), outcome=outcome(report), sweep=sweep, paper_stops=paper_stops)
@@ -243,11 +251,13 @@ def main(argv=None):
              "",
              f"{'scene':22s} {'n':>3s} {'joints':>6s} {'pairs':>5s} {'cont':>5s} {'t_end':>5s} {'steps':>6s} "
              f"{'sim s/s':>8s} {'us/step':>8s} {'cpu us':>7s} {'setup ms':>8s} {'before ms':>9s} {'after ms':>8s} "
+             f"{'1st ord ms':>10s} "
              f"{'D_j ms':>7s} {'exact':>6s} {'same':>5s}  outcome"]
     for x in rows:
         lines.append(f"{x['label']:22s} {x['bodies']:3d} {x['joints']:6d} {x['pairs']:5d} {x['contacts']:5d} {x['t_end']:5.2f} "
                      f"{x['steps']:6d} {x['sim_per_s']:8.2f} {x['per_step'] * 1e6:8.1f} {x['cpu_step'] * 1e6:7.1f} "
                      f"{x['setup'] * 1e3:8.1f} {x['before'] * 1e3:9.3f} {x['after'] * 1e3:8.3f} "
+                     f"{x['first'] * 1e3:10.3f} "
                      f"{x['dj'] * 1e3:7.3f} {x['exact']:6.1f} {str(x['identical']):>5s}  "
                      f"{x['outcome']} ({x['checked']} samples checked)")
     n = np.array([x["bodies"] for x in rows], dtype=float)
@@ -256,7 +266,8 @@ def main(argv=None):
                       ("per_step", "simulation, wall per step"),
                       ("cpu_step", "simulation, CPU per step"), ("setup", "check set-up"),
                       ("before", "check per sample, before (prune off)"),
-                      ("after", "check per sample, after (prune on)"), ("dj", "D_j per sample (refine off)")):
+                      ("after", "check per sample, after (prune on)"),
+                      ("first", "check per sample, speed bound only"), ("dj", "D_j per sample (refine off)")):
         lines.append(f"  {name:40s} {exponent(n, [x[key] for x in rows]):5.2f}")
     largest, overall = rows[-1], exponent(n, [x["sim_per_s"] for x in rows])
     lines += ["", "issue 33's goals, at the scene's tolerances:",
@@ -281,6 +292,10 @@ def main(argv=None):
                          f"{steps} steps ({steps / x['steps']:.2f}x), {error}")
     lines += ["", "before / after, median of the per-sample ratios: "
               + ", ".join(f"{x['label']} {x['ratio']:.2f}" for x in rows),
+              "speed bound only / after (the second-order bound), median of the per-sample ratios, "
+              "bisection steps without and with it, and whether both found the same:",
+              *(f"  {x['label']:22s} {x['first_ratio']:5.2f}x, {x['bisections'][0]} -> {x['bisections'][1]} "
+                f"steps, same {x['first_same']}" for x in rows),
               f"total bench time {time.perf_counter() - start:.0f} s"]
     text = "\n".join(lines)
     print(text)

@@ -1,9 +1,12 @@
 """Between-sample motion bounds (collision.motion) against independent computations.
 
 The radii are checked against the point-to-line distance |r x u| of every
-corner, the rate bound against a dense grid of scipy's Hermite spline, and
-the pair speed bound against finite differences of the exact signed distance
-along random motions of the paper's design: it must never be exceeded. The
+corner, the rate and acceleration bounds against a dense grid of scipy's
+Hermite spline, the pair speed bound against finite differences of the exact
+signed distance along random motions of the paper's design (it must never be
+exceeded), and the second-order bound's pieces against forward kinematics:
+each view's speed against central differences of the corners seen from the
+other body, its acceleration bound against their second differences. The
 pairs' tree paths, compiled, are a plain walk up the tree's to the bit.
 """
 
@@ -50,17 +53,18 @@ def test_radii_are_the_corner_distances_from_each_hinge_line(paper):
                                    rtol=1e-12, atol=1e-12)
 
 
-def test_rate_bound_is_the_largest_rate_on_a_dense_grid():
-    rng = np.random.default_rng(5)
+@pytest.mark.parametrize("order", [1, 2])
+def test_rate_and_acceleration_bounds_are_the_largest_on_a_dense_grid(order):
+    rng = np.random.default_rng(4 + order)
     for _ in range(20):
         th0, th1, w0, w1 = (rng.normal(size=6) for _ in range(4))
         seg = HermiteSegment(0.2, th0, w0, 0.25, th1, w1)
         spline = CubicHermiteSpline([0.2, 0.25], [th0, th1], [w0, w1])
         ta, tb = np.sort(rng.uniform(0.2, 0.25, 2))
         grid = np.linspace(ta, tb, 20001)
-        dense = np.abs(spline(grid, 1)).max(axis=0)
-        got = seg.rate_bound(ta, tb)
-        assert np.all(got >= dense - 1e-12)
+        dense = np.abs(spline(grid, order)).max(axis=0)
+        got = (seg.rate_bound if order == 1 else seg.accel_bound)(ta, tb)
+        assert np.all(got >= dense * (1 - 1e-12))
         np.testing.assert_allclose(got, dense, rtol=1e-6)
 
 
@@ -87,6 +91,63 @@ def test_pair_speed_bound_is_never_exceeded_along_random_motions(paper):
         rate = np.abs(np.diff(sd, axis=0)).max(axis=0) / ((tb - ta) / 80)
         assert np.all(rate <= L * (1 + 1e-9) + 1e-12)
         ratios.append((rate / L).max())
+    assert max(ratios) > 0.1
+
+
+def seen_from(model, R, p, x, y):
+    """The 8 corners (..., 8, 3) of body y in body x's frame, m, the bodies at
+    poses R (..., nb, 3, 3), p (..., nb, 3)."""
+    signs = np.array([(i, j, k) for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
+    offsets = np.einsum("...ij,cj->...ci", R[..., y, :, :], signs * np.asarray(model.bodies[y].size) / 2)
+    return np.einsum("...ci,...ij->...cj", p[..., y, None, :] + offsets - p[..., x, None, :], R[..., x, :, :])
+
+
+def random_segments(model, rng, count, rate=20.0):
+    for _ in range(count):
+        th0, th1 = rng.uniform(0.3, 2.8, (2, model.n_coords))
+        w0, w1 = rng.uniform(-rate, rate, (2, model.n_coords))
+        yield HermiteSegment(0.0, th0, w0, 0.05, th1, w1)
+
+
+def test_pair_speeds_are_the_corners_speeds_seen_from_each_body(paper):
+    """V of each view is the largest speed of the corners of one body in the
+    other's frame, by central differences of forward kinematics."""
+    from panel_deploy.dynamics.kernels import body_states
+    from panel_deploy.dynamics.pack import kinematic_part, pack
+
+    pairs = np.asarray(paper.collision_pairs)
+    bound, rows = PairSpeedBound(paper, pairs), np.arange(len(pairs))
+    packed, dt = kinematic_part(pack(paper)), 1e-6
+    for seg in random_segments(paper, np.random.default_rng(13), 3):
+        theta, omega = seg(0.02)
+        V = bound.speeds(*body_states(packed, theta, omega), rows)
+        after, before = (forward_kinematics(paper, seg(0.02 + sign * dt)[0]) for sign in (1, -1))
+        for view, (x, y) in enumerate((pairs.T, pairs.T[::-1])):
+            fd = [np.linalg.norm(seen_from(paper, *after, i, j) - seen_from(paper, *before, i, j),
+                                 axis=1).max() / (2 * dt) for i, j in zip(x, y)]
+            np.testing.assert_allclose(V[view], fd, rtol=1e-6, atol=1e-9)
+
+
+def test_acceleration_bound_is_never_exceeded_along_random_motions(paper):
+    """The corners of one body seen from the other accelerate (second
+    differences over a dense grid) no faster than the bound of that view,
+    over Hermite motions at up to 20 rad/s; and the bound is not vacuous."""
+    pairs = np.asarray(paper.collision_pairs)
+    bound, rows = PairSpeedBound(paper, pairs), np.arange(len(pairs))
+    ta, tb, steps = 0.01, 0.03, 400
+    dt = (tb - ta) / steps
+    ratios = []
+    for seg in random_segments(paper, np.random.default_rng(17), 4):
+        radii = [bound.radii(*forward_kinematics(paper, seg(t)[0])) for t in (ta, tb)]
+        A = bound.acceleration(seg.rate_bound(ta, tb), seg.accel_bound(ta, tb), tb - ta, *radii, rows)
+        poses = [forward_kinematics(paper, seg(t)[0]) for t in np.linspace(ta, tb, steps + 1)]
+        R, p = np.array([pose[0] for pose in poses]), np.array([pose[1] for pose in poses])
+        for view, (x, y) in enumerate((pairs.T, pairs.T[::-1])):
+            for k, (i, j) in enumerate(zip(x, y)):
+                path = seen_from(paper, R, p, i, j)
+                measured = np.linalg.norm(np.diff(path, 2, axis=0), axis=2).max() / dt ** 2
+                assert measured <= A[view, k] * (1 + 1e-6), (view, (i, j), measured, A[view, k])
+                ratios.append(measured / A[view, k])
     assert max(ratios) > 0.1
 
 

@@ -15,6 +15,24 @@ ends plus how far it can grow in between (:meth:`PairSpeedBound.__call__`).
 The same holds seen from B with the bodies before k. The signed distance of
 two convex bodies changes by at most the largest point displacement, so
 |d sd/dt| <= L = min of the two sums (m/s).
+
+Second-order bound. L ignores that the hinges of a fold turn against each
+other: two panels riding together in a stack, whose distance changes by
+centimetres a second, get tens of m/s from the fast hinges near the tree's
+root. At an instant, though, the speed of B's points seen from A is known
+exactly: V = the largest |v_B(y) - v_A(y)| over B's corners (the relative
+velocity is affine in y, so its norm is largest at a corner;
+:func:`pair_speeds`). Over the interval it grows no faster than the
+acceleration of B's points seen from A. Differentiating
+v(y) = sum_k omega_k u_k x (y - p_k), with u_k and p_k fixed in b_{k-1}
+(which turns at Omega_{k-1} = sum_{l<k} omega_l u_l) and p_k taken at the
+foot of y on line k (|y - p_k| = rho_k), gives
+|a(y)| <= A = sum_k rho_k (|alpha_k| + w_k (3 W_{<k} + w_k)), W_{<k} the
+sum of the rate bounds w_l of the joints between A and k and alpha_k the
+bound on |d omega_k / dt| (:func:`_accel_bound`). So over the interval
+|d sd/dt| <= V(t_a) + A (t - t_a), and <= V(t_b) + A (t_b - t), in either
+view (B seen from A, A from B: each view its own V and A); what the
+search uses where L alone cannot close a pair (:mod:`.refine`).
 """
 
 from __future__ import annotations
@@ -76,6 +94,25 @@ class PairSpeedBound:
         """
         return _speed_bound(rate_bound, float(h), radii_a, radii_b, np.asarray(rows, dtype=np.int64),
                             self.coords, self.length, self.chain_a, self.chain_b, self.a, self.b)
+
+    def acceleration(self, rate_bound, accel, h, radii_a, radii_b, rows) -> np.ndarray:
+        """Largest acceleration (m/s^2) of b's points seen from a and of a's seen
+        from b, (2, len(rows)), over an interval of length h (s) on which the
+        coordinates turn at most at ``rate_bound`` (rad/s) and accelerate at most
+        at ``accel`` (rad/s^2); radii as :meth:`__call__`'s."""
+        return _accel_bound(rate_bound, accel, float(h), radii_a, radii_b, np.asarray(rows, dtype=np.int64),
+                            self.coords, self.length, self.chain_a, self.chain_b, self.a, self.b)
+
+    def speeds(self, rotation, position, velocity, angular_velocity, rows) -> np.ndarray:
+        """V (m/s) of the pairs ``rows``, (2, len(rows)): the largest speed of
+        b's corners seen from a, then of a's seen from b, the bodies at
+        (rotation, position) moving at (velocity, angular_velocity), (nb, 3)
+        each, m/s and rad/s, ground frame."""
+        rows = np.asarray(rows, dtype=np.int64)
+        out = np.zeros((2, len(self.a)))
+        pair_speeds(np.asarray(rotation, float), np.asarray(position, float), np.asarray(velocity, float),
+                    np.asarray(angular_velocity, float), self.half, self.a, self.b, rows, out)
+        return out[:, rows]
 
 
 @njit(cache=True)
@@ -232,6 +269,95 @@ def _speed_bound(rate_bound, h, radii_a, radii_b, rows, coords, length, chain_a,
     return out
 
 
+@njit(cache=True)
+def _accel_bound(rate_bound, accel, h, radii_a, radii_b, rows, coords, length, chain_a, chain_b, a, b):
+    """Largest acceleration (m/s^2) of one body's points seen from the other,
+    over an interval of length h (s), of the pairs ``rows`` (module
+    docstring, "Second-order bound"): sum_k rho_k (alpha_k + w_k (3 W_{<k} +
+    w_k)), (2, len(rows)): b's points seen from a, then a's seen from b.
+
+    ``rate_bound`` and ``accel`` are max |omega| (rad/s) and max |d omega/dt|
+    (rad/s^2) per coordinate over the interval; the other arguments and the
+    bound rho_k on the radius over the interval are :func:`_speed_bound`'s.
+    """
+    out = np.empty((2, rows.shape[0]))
+    for i in range(rows.shape[0]):
+        p = rows[i]
+        m = length[p]
+        W = 0.0
+        for k in range(m):
+            W += rate_bound[coords[p, k]]
+        # b's points seen from a: the joints from b's end (the radius grows by
+        # those beyond k); a's points seen from b: from a's end
+        view_a = _accel_view(p, m - 1, -1, -1, b[p], chain_a, W, rate_bound, accel, h, radii_a, radii_b, coords)
+        view_b = _accel_view(p, 0, m, 1, a[p], chain_b, W, rate_bound, accel, h, radii_a, radii_b, coords)
+        # sums of positive terms: rounding moves them by ~m eps of themselves
+        out[0, i], out[1, i] = (1.0 + CAP_SLACK) * view_a, (1.0 + CAP_SLACK) * view_b
+    return out
+
+
+@njit(cache=True)
+def _accel_view(p, first, stop, step, body, chain, W, rate_bound, accel, h, radii_a, radii_b, coords):
+    """One view of :func:`_accel_bound` for pair p: the joints k = first,
+    first + step, .. (not stop), from the far end of the path towards the
+    observing body, so that the joints passed are those beyond k (whose
+    chain bounds grow the radius of ``body`` about k) and W less them is
+    W_{<k}, the joints between the observer and k."""
+    grown, passed, total = 0.0, 0.0, 0.0
+    for k in range(first, stop, step):
+        c = coords[p, k]
+        w = rate_bound[c]
+        passed += w
+        rho = min((radii_a[body, c] + radii_b[body, c] + h * grown) / 2.0, chain[p, k])
+        total += rho * (accel[c] + w * (3.0 * max(W - passed, 0.0) + w))
+        grown += w * chain[p, k]
+    return total
+
+
+@njit(cache=True)
+def pair_speeds(R, p, v, w, half, a, b, rows, out):
+    """Write into ``out[:, rows]`` (2, P) each pair's V (m/s): the largest
+    speed of b's corners seen from a, then of a's seen from b, the bodies at
+    poses (R, p) with centroid velocities v (m/s) and angular velocities w
+    (rad/s), all (nb, ...) in the ground frame, half edges ``half`` (nb, 3), m."""
+    base, edge = np.empty(3), np.empty((3, 3))
+    for k in rows:
+        for view, (x, y) in enumerate(((a[k], b[k]), (b[k], a[k]))):
+            # At y's corner q = p_y + sum_j s_j half_j R_y[:, j] the velocity seen
+            # from x is v_y - v_x + w_x x (p_x - p_y) + sum_j s_j (w_y - w_x) x half_j R_y[:, j].
+            d = p[x] - p[y]
+            wx, dw = w[x], w[y] - w[x]
+            base[0] = v[y, 0] - v[x, 0] + wx[1] * d[2] - wx[2] * d[1]
+            base[1] = v[y, 1] - v[x, 1] + wx[2] * d[0] - wx[0] * d[2]
+            base[2] = v[y, 2] - v[x, 2] + wx[0] * d[1] - wx[1] * d[0]
+            for j in range(3):
+                e0, e1, e2 = half[y, j] * R[y, 0, j], half[y, j] * R[y, 1, j], half[y, j] * R[y, 2, j]
+                edge[j, 0] = dw[1] * e2 - dw[2] * e1
+                edge[j, 1] = dw[2] * e0 - dw[0] * e2
+                edge[j, 2] = dw[0] * e1 - dw[1] * e0
+            far = 0.0
+            for corner in range(8):
+                speed = 0.0
+                for i in range(3):
+                    r = base[i]
+                    for j in range(3):
+                        r += edge[j, i] if (corner >> j) & 1 else -edge[j, i]
+                    speed += r * r
+                far = max(far, speed)
+            out[view, k] = (1.0 + CAP_SLACK) * math.sqrt(far)
+
+
+@njit(cache=True)
+def _accel_of(A, B, sa, sb, h):
+    """max |d omega / dt| (rad/s^2) over s in [sa, sb] of every coordinate of a
+    :class:`HermiteSegment` (its coefficients A, B; length h, s): (2 A s + B) / h^2
+    is linear in s, largest at an end."""
+    out = np.empty(A.shape[0])
+    for i in range(A.shape[0]):
+        out[i] = max(abs(2.0 * A[i] * sa + B[i]), abs(2.0 * A[i] * sb + B[i])) / (h * h)
+    return out
+
+
 #: Relative slack of :func:`speed_caps` over the rounding of both bounds: each
 #: is a sum of at most ~150 terms (12 x 12 panels), so rounding moves either by
 #: under 1e-13 of itself.
@@ -325,6 +451,10 @@ class HermiteSegment:
         """max |omega| over [ta, tb] of every coordinate, rad/s, shape (n,)."""
         return _rate_bound(self._A, self._B, self._C, (ta - self.t0) / self.h,
                            (tb - self.t0) / self.h, self.h)
+
+    def accel_bound(self, ta, tb) -> np.ndarray:
+        """max |d omega / dt| over [ta, tb] of every coordinate, rad/s^2, shape (n,)."""
+        return _accel_of(self._A, self._B, (ta - self.t0) / self.h, (tb - self.t0) / self.h, self.h)
 
 
 @njit(cache=True)

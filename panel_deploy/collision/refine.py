@@ -25,10 +25,12 @@ Arguments shared by the kernels (tuples, so that numba specialises once):
     then :class:`.motion.PairSpeedBound`'s tables.
 ``seg`` = ``(t0, h, theta0, A, B, C)``
     :attr:`.motion.HermiteSegment.coefficients`.
-``lim`` = ``(threshold, resolution, time_resolution, prune)``
-    -tolerance (m), the depth slack (m), the time resolution (s), and
-    whether the whole interval's pairs are first screened by
-    :func:`.motion.speed_caps` (:func:`refine_interval`).
+``lim`` = ``(threshold, resolution, time_resolution, prune, second_order)``
+    -tolerance (m), the depth slack (m), the time resolution (s), whether
+    the whole interval's pairs are first screened by
+    :func:`.motion.speed_caps` (:func:`refine_interval`), and whether the
+    pairs the speed bound leaves open get the second-order bound of
+    :mod:`.motion`.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ from numba import njit
 
 from ..dynamics.kernels import body_states
 from .geometry import box_signed_distance
-from .motion import _rate_bound, _speed_bound, hinge_radii_of, needed_radii, speed_caps
+from .motion import _accel_bound, _accel_of, _rate_bound, _speed_bound, hinge_radii_of, needed_radii, pair_speeds, speed_caps
 
 # Columns of the search's stack frames (refine_interval): the slots of a node's
 # ends, its stage, and how many pairs it bounds.
@@ -54,15 +56,24 @@ MAX_DEPTH = 128
 
 
 @njit(cache=True)
-def poses(geo, seg, t):
-    """Rotations (nb, 3, 3) and centroids (nb, 3), m, of the bodies at instant t
-    (s), the angles computed as :meth:`.motion.HermiteSegment.__call__` does."""
+def states(geo, seg, t):
+    """Rotations (nb, 3, 3), centroids (nb, 3) m, centroid velocities (nb, 3)
+    m/s and angular velocities (nb, 3) rad/s of the bodies at instant t (s),
+    the angles and rates computed as :meth:`.motion.HermiteSegment.__call__` does."""
     t0, h, th0, A, B, C = seg
     s = (t - t0) / h
     theta = np.empty(th0.shape[0])
+    omega = np.empty(th0.shape[0])
     for i in range(th0.shape[0]):
         theta[i] = th0[i] + s * (C[i] + s * (B[i] / 2.0 + s * A[i] / 3.0))
-    R, p, _, _ = body_states(geo[0], theta, np.zeros(theta.shape[0]))
+        omega[i] = (C[i] + s * (B[i] + s * A[i])) / h
+    return body_states(geo[0], theta, omega)
+
+
+@njit(cache=True)
+def poses(geo, seg, t):
+    """Rotations (nb, 3, 3) and centroids (nb, 3), m, of the bodies at instant t (s)."""
+    R, p, _, _ = states(geo, seg, t)
     return R, p
 
 
@@ -95,11 +106,13 @@ def _visit(threshold, tm, rows, S, found_t, last_touch, order, n_found):
 def stack(capacity, n_pairs, nb, n):
     """Room for :func:`refine_interval`'s search ``capacity`` levels deep, for
     ``n_pairs`` pairs and radii tables (nb, n): instants (s), distances (m)
-    and radii (m) of the capacity + 2 slots, and the frames and pairs of
-    the levels."""
+    and radii (m) of the capacity + 2 slots, the frames and pairs of the
+    levels, and the pairs' speeds V (m/s, :func:`.motion.pair_speeds`, both
+    views) at the slots."""
     slots = capacity + 2
     return (np.empty(slots), np.empty((slots, n_pairs)), np.empty((slots, nb, n)),
-            np.empty((capacity, 4), np.int64), np.empty((capacity, n_pairs), np.int64))
+            np.empty((capacity, 4), np.int64), np.empty((capacity, n_pairs), np.int64),
+            np.empty((slots, 2, n_pairs)))
 
 
 @njit(cache=True)
@@ -129,8 +142,8 @@ def refine_interval(geo, seg, lim, t1, D0, D1, radii0, radii1, colliding, work):
     """
     _, half, pa, pb, coords, length, chain_a, chain_b, parents, points, axes, tree, lca, reach_a, reach_b = geo
     t0, h, _, A, B, C = seg
-    threshold, resolution, time_resolution, prune = lim
-    t_at, S_at, R_at, frame, given = work
+    threshold, resolution, time_resolution, prune, second_order = lim
+    t_at, S_at, R_at, frame, given, V_at = work
     n_pairs = D0.shape[0]
     found_t = np.full(n_pairs, np.nan)
     last_touch = np.full(n_pairs, np.nan)
@@ -222,13 +235,36 @@ def refine_interval(geo, seg, lim, t1, D0, D1, radii0, radii1, colliding, work):
                     return found_t, last_touch, order[:0], 0, -1, False
                 given[d + 1, n_open] = k
                 n_open += 1
+        if n_open and second_order:
+            # What L leaves open, the second-order bound may close (.motion):
+            # each half of the interval from its own end's V.
+            sub = given[d + 1, :n_open]
+            if d == 0:
+                for slot_end, t_end in ((0, t0), (1, t1)):
+                    R, p, v, om = states(geo, seg, t_end)
+                    pair_speeds(R, p, v, om, half, pa, pb, sub, V_at[slot_end])
+            acc = _accel_bound(w, _accel_of(A, B, (a - t0) / h, (b - t0) / h, h), b - a, R_at[lo], R_at[hi],
+                               sub, coords, length, chain_a, chain_b, pa, pb)
+            tau = 0.5 * (b - a)
+            kept = 0
+            for i in range(n_open):
+                k = sub[i]
+                grow_a, grow_b = 0.5 * acc[0, i] * tau, 0.5 * acc[1, i] * tau
+                lower = min(S_at[lo, k] - tau * min(V_at[lo, 0, k] + grow_a, V_at[lo, 1, k] + grow_b),
+                            S_at[hi, k] - tau * min(V_at[hi, 0, k] + grow_a, V_at[hi, 1, k] + grow_b))
+                if lower < threshold - resolution:
+                    given[d + 1, kept] = k
+                    kept += 1
+            n_open = kept
         if n_open == 0:
             frame[d, STAGE] = DONE
             continue
         sub = given[d + 1, :n_open]
         m = 0.5 * (a + b)
-        R, p = poses(geo, seg, m)
+        R, p, v, om = states(geo, seg, m)
         _distances(geo, R, p, sub, S_at[slot])
+        if second_order:
+            pair_speeds(R, p, v, om, half, pa, pb, sub, V_at[slot])
         radii = hinge_radii_of(R, p, half, parents, points, axes, needed_radii(sub, coords, length, pa, pb, nb, n))
         for x in range(nb):
             for c in range(n):

@@ -520,7 +520,8 @@ class CollisionMonitor:
         while True:
             limits = (-s.tolerance, s.resolution, s.time_resolution, s.prune, s.second_order)
             found_t, last_touch, order, pressed, steps, midpoint = refine_interval(
-                self._geo, seg.coefficients, limits, cur.t, prev.distances, cur.distances, prev.radii, cur.radii, self.colliding, self._stack)
+                self._geo, seg.coefficients, limits, cur.t, prev.distances, cur.distances, prev.radii,
+                cur.radii, self.colliding, self._stack)
             if steps >= 0:
                 break
             depth = len(self._stack[3])

@@ -40,7 +40,8 @@ from numba import njit
 
 from ..dynamics.kernels import body_states
 from .geometry import box_signed_distance
-from .motion import _accel_bound, _accel_of, _rate_bound, _speed_bound, hinge_radii_of, needed_radii, pair_speeds, speed_caps
+from .motion import (_accel_bound, _accel_of, _rate_bound, _speed_bound, hinge_radii_of, needed_radii,
+                     pair_speeds, speed_caps)
 
 # Columns of the search's stack frames (refine_interval): the slots of a node's
 # ends, its stage, and how many pairs it bounds.

@@ -23,4 +23,6 @@ def test_signal_ends_the_node_cleanly(client, node, sig):
     proc = NodeProcess(node, node_name=name)
     wait_for(lambda: client.has_node(name), timeout=60, what=f"{node} to start")
     code, seconds, err = proc.stop(sig)
-    assert code == 0 and seconds < 2.0 and "Traceback" not in err, (code, seconds, err)
+    # A node that hangs is killed after stop's 10 s (exit != 0); one that ended
+    # cleanly took 2.08 s once on 2 loaded cores in CI: 5 s still tells them apart.
+    assert code == 0 and seconds < 5.0 and "Traceback" not in err, (code, seconds, err)

@@ -15,7 +15,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 class BuildWithKernels(build_py):
     """build_py, then compile the numba kernels into the package being built.
 
-    The package's first run then loads them instead of compiling for a minute
+    The package's first run then loads them instead of compiling for minutes
     (see panel_deploy/_precompile.py). Where the build environment cannot run
     the package (colcon without numba, say), or PANEL_DEPLOY_COMPILE_KERNELS=0,
     the package is built without them and compiles on first use.
@@ -34,7 +34,7 @@ class BuildWithKernels(build_py):
         env["PYTHONPATH"] = os.pathsep.join(
             [os.path.abspath(self.build_lib)] + [p for p in [env.get("PYTHONPATH")] if p])
         env["PYTHONDONTWRITEBYTECODE"] = "1"
-        print("compiling the numba kernels for this machine (about a minute)", flush=True)
+        print("compiling the numba kernels for this machine (a few minutes)", flush=True)
         done = subprocess.run(
             [sys.executable, "-m", f"{PACKAGE}._precompile",
              os.path.join(HERE, "config", "scenes", "paper_4x4.yaml")],

@@ -63,7 +63,7 @@ KERNEL_SOURCES = ("boxes.py", "collision/geometry.py", "collision/monitor.py", "
                   "collision/refine.py", "dynamics/articulated.py", "dynamics/integrate.py",
                   "dynamics/kernels.py", "dynamics/pack.py", "dynamics/rosenbrock.py")
 
-NOTICE = "panel-deploy: compiling kernels for this machine, first run only (a minute or two)"
+NOTICE = "panel-deploy: compiling kernels for this machine, first run only (a few minutes)"
 
 
 def user_cache_dir(environ=os.environ) -> Path:

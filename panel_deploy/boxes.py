@@ -277,6 +277,122 @@ def _overlap_corners(A, ma, B, mb, on, merge, out):
     return count
 
 
+#: Share of k_p and c_p of each point of a corner contact: a face pressed flat
+#: on another presses at the four corners of their overlap.
+FACE_POINTS = 4
+
+
+@njit(cache=True)
+def _clip(P, m, c0, cx, cy, out):
+    """The part of the convex polygon P[:m] (2-d, in order) where
+    c0 + cx x + cy y >= 0, written to out in the same order; returns its
+    vertex count (one step of Sutherland and Hodgman's clipping)."""
+    count = 0
+    for k in range(m):
+        x0, y0 = P[k, 0], P[k, 1]
+        x1, y1 = P[(k + 1) % m, 0], P[(k + 1) % m, 1]
+        g0 = c0 + cx * x0 + cy * y0
+        g1 = c0 + cx * x1 + cy * y1
+        if g0 >= 0.0:
+            out[count, 0], out[count, 1] = x0, y0
+            count += 1
+        if (g0 >= 0.0) != (g1 >= 0.0):
+            s = g0 / (g0 - g1)
+            out[count, 0], out[count, 1] = x0 + s * (x1 - x0), y0 + s * (y1 - y0)
+            count += 1
+    return count
+
+
+@njit(cache=True)
+def _area(P, m):
+    """Signed area of the polygon P[:m] (2-d; > 0 counter-clockwise), m^2."""
+    twice = 0.0
+    for k in range(m):
+        twice += P[k, 0] * P[(k + 1) % m, 1] - P[(k + 1) % m, 0] * P[k, 1]
+    return 0.5 * twice
+
+
+@njit(cache=True)
+def _affine_height(P):
+    """(h0, hx, hy): the plane h = h0 + hx x + hy y through the first three
+    points of P (x, y, height); NaNs where they are in line (a face seen
+    edge on)."""
+    ux, uy, uz = P[1, 0] - P[0, 0], P[1, 1] - P[0, 1], P[1, 2] - P[0, 2]
+    vx, vy, vz = P[2, 0] - P[0, 0], P[2, 1] - P[0, 1], P[2, 2] - P[0, 2]
+    det = ux * vy - uy * vx
+    if abs(det) <= 1e-12 * (ux * ux + uy * uy + vx * vx + vy * vy):
+        return np.nan, np.nan, np.nan
+    hx = (uz * vy - vz * uy) / det
+    hy = (vz * ux - uz * vx) / det
+    return P[0, 2] - hx * P[0, 0] - hy * P[0, 1], hx, hy
+
+
+@njit(cache=True, inline='always')
+def _fan_area(P, t):
+    """Area of the triangle (0, t, t + 1) of the polygon P (counter-clockwise)."""
+    return 0.5 * ((P[t, 0] - P[0, 0]) * (P[t + 1, 1] - P[0, 1])
+                  - (P[t + 1, 0] - P[0, 0]) * (P[t, 1] - P[0, 1]))
+
+
+@njit(cache=True)
+def _pressure_points(A, ma, B, mb, e1, e2, n, poly, spare, points, depths, weights):
+    """Faces A[:ma] and B[:mb] (ordered by :func:`_plane`, 3 points or more
+    each) pressed together by a pressure in proportion to the depth: the
+    quadrature points of the part of their overlap where a reaches past b,
+    written to points, depths and weights; returns their number, or -1 when
+    a face is seen edge on.
+
+    The depth d = h_a - h_b is affine over the plane, so the overlap clipped
+    to d >= 0 is a convex polygon (Sutherland and Hodgman: against each edge
+    of B, then d >= 0). Each triangle of its fan from corner 0 takes the
+    midpoints of its edges, each a third of its area (exact for a quadratic:
+    the push, the integral of d, and its moment, of x d); a diagonal's
+    midpoint serves both its triangles. A point's weight is its area as a
+    share of the smaller face's, so the weights sum to 1 over a face pressed
+    whole on one as large. Where the overlap gains or loses a corner, its
+    triangle comes or goes with no area, so the push is continuous in the
+    pose, where springs at the overlap's corners jump."""
+    ha0, hax, hay = _affine_height(A)
+    hb0, hbx, hby = _affine_height(B)
+    reference = min(abs(_area(A, ma)), abs(_area(B, mb)))
+    if not (math.isfinite(ha0) and math.isfinite(hb0)) or reference <= 0.0:
+        return -1
+    m = ma
+    for k in range(ma):
+        poly[k, 0], poly[k, 1] = A[k, 0], A[k, 1]
+    for k in range(mb):  # the left of each edge of B, counter-clockwise
+        ax, ay = B[k, 0], B[k, 1]
+        cx, cy = ay - B[(k + 1) % mb, 1], B[(k + 1) % mb, 0] - ax
+        m = _clip(poly, m, -(cx * ax + cy * ay), cx, cy, spare)
+        poly, spare = spare, poly
+        if m < 3:
+            return 0
+    m = _clip(poly, m, ha0 - hb0, hax - hbx, hay - hby, spare)
+    poly = spare
+    if m < 3:
+        return 0
+    count = 0
+    # edges (i, j) of the fan: its outline, then the diagonals (0, t)
+    for k in range(2 * m - 3):
+        if k < m:
+            i, j = k, (k + 1) % m
+            area = _fan_area(poly, min(max(k, 1), m - 2))
+        else:
+            i, j = 0, k - m + 2
+            area = _fan_area(poly, j - 1) + _fan_area(poly, j)
+        x, y = 0.5 * (poly[i, 0] + poly[j, 0]), 0.5 * (poly[i, 1] + poly[j, 1])
+        top, bottom = ha0 + hax * x + hay * y, hb0 + hbx * x + hby * y
+        if top - bottom <= 0.0 or area <= 0.0:
+            continue
+        z = 0.5 * (top + bottom)
+        for q in range(3):
+            points[count, q] = x * e1[q] + y * e2[q] + z * n[q]
+        depths[count] = top - bottom
+        weights[count] = area / (3.0 * reference)
+        count += 1
+    return count
+
+
 @njit(cache=True, inline='always')
 def plane_axes(n):
     """Unit vectors (e1, e2) (3-tuples) that make (e1, e2, n) a right-handed
@@ -291,21 +407,24 @@ def plane_axes(n):
     return e1, (n[1] * e1[2] - n[2] * e1[1], n[2] * e1[0] - n[0] * e1[2], n[0] * e1[1] - n[1] * e1[0])
 
 
-#: Most contact points of one pair: 8 corners inside plus 8 edge crossings.
+#: Most contact points of one pair: 8 corners inside plus 8 edge crossings;
+#: 2 m - 3 edges of the fan of a pressed overlap of m <= 9 corners.
 MAX_POINTS = 16
 
 
 @njit(cache=True)
 def scratch():
     """The work space :func:`contact` takes, allocated once by its caller;
-    the contact points and their depths are left in its last two arrays."""
+    the contact points, their depths and their weights are left in its last
+    three arrays."""
     return (np.empty((8, 3)), np.empty((8, 3)), np.empty((8, 3)), np.empty((8, 3)),
             np.empty((8, 3)), np.empty((8, 3)), np.empty(8), np.empty((MAX_POINTS, 2)),
-            np.empty((MAX_POINTS, 3)), np.empty(MAX_POINTS))
+            np.empty((MAX_POINTS, 2)), np.empty((MAX_POINTS, 2)),
+            np.empty((MAX_POINTS, 3)), np.empty(MAX_POINTS), np.empty(MAX_POINTS))
 
 
 @njit(cache=True)
-def contact(Ra, ca, ha, Rb, cb, hb, work):
+def contact(Ra, ca, ha, Rb, cb, hb, work, pressure=False):
     """Where and how deep boxes a and b (given as in :func:`separation`) interfere.
 
     The separating-axis test gives the normal n (from a towards b) of least
@@ -318,10 +437,17 @@ def contact(Ra, ca, ha, Rb, cb, hb, work):
     so a tilted face presses deeper at one edge; the point itself is half
     way between the two.
 
+    Each point has a weight, its share of the pair's stiffness and damping:
+    1 / FACE_POINTS at a corner. With ``pressure``, two faces (features of
+    three corners or more, not seen edge on) push instead by a pressure in
+    proportion to the depth over their overlap, at the quadrature points of
+    :func:`_pressure_points`, each weighted by its share of the smaller
+    face's area; an edge or a corner still pushes at the corners.
+
     Returns ``(count, normal)``: the number of points that interfere (0 when
     the separating-axis test finds the boxes apart) and n (a 3-tuple). The
-    points (m) and their depths (m, > 0) are ``work[-2][:count]`` and
-    ``work[-1][:count]``; ``work`` is :func:`scratch`.
+    points (m), their depths (m, > 0) and weights are ``work[-3][:count]``,
+    ``work[-2][:count]`` and ``work[-1][:count]``; ``work`` is :func:`scratch`.
     """
     depth, axis, along = least_overlap(Ra, ca, ha, Rb, cb, hb, 0.0)
     if depth <= 0.0:
@@ -329,12 +455,16 @@ def contact(Ra, ca, ha, Rb, cb, hb, work):
     s = 1.0 if along >= 0.0 else -1.0
     n = (s * axis[0], s * axis[1], s * axis[2])
     eps = FEATURE * min(min(ha[0], ha[1], ha[2]), min(hb[0], hb[1], hb[2]))
-    Va, Vb, Fa, Fb, A, B, angle, corners2, points, depths = work
+    Va, Vb, Fa, Fb, A, B, angle, corners2, poly, spare, points, depths, weights = work
     ma, _ = _feature(corners_into(Ra, ca, ha, Va), n, 1.0, eps, Fa)
     mb, _ = _feature(corners_into(Rb, cb, hb, Vb), n, -1.0, eps, Fb)
     e1, e2 = plane_axes(n)
     _plane(Fa, ma, n, e1, e2, A, angle)
     _plane(Fb, mb, n, e1, e2, B, angle)
+    if pressure and ma >= 3 and mb >= 3:
+        count = _pressure_points(A, ma, B, mb, e1, e2, n, poly, spare, points, depths, weights)
+        if count >= 0:
+            return count, n
     found = _overlap_corners(A, ma, B, mb, COINCIDENT, eps, corners2)
     count = 0
     for q in range(found):
@@ -346,5 +476,6 @@ def contact(Ra, ca, ha, Rb, cb, hb, work):
         for m in range(3):
             points[count, m] = x * e1[m] + y * e2[m] + z * n[m]
         depths[count] = top - bottom
+        weights[count] = 1.0 / FACE_POINTS
         count += 1
     return count, n

@@ -192,7 +192,8 @@ def build_model(scene: Scene, design=None) -> Model:
     if scene.contact.panels:
         model = with_panel_contacts(model, scene.contact.k_p, scene.contact.c_p,
                                     reach=scene.contact.reach, mu_p=scene.contact.friction,
-                                    friction_speed=scene.contact.friction_speed)
+                                    friction_speed=scene.contact.friction_speed,
+                                    pressure=scene.contact.pressure)
     return model
 
 

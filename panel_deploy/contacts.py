@@ -8,7 +8,8 @@ other; without a contact between them the dynamics let them pass through
 each other (on 6 x 6 and larger arrays every first packing circuit did,
 within 0.02-0.06 s). :func:`stowed_contacts` lists the pairs; their
 contact (compliant, normal, at the corners of the overlap of the two boxes'
-facing features) is :func:`panel_deploy.dynamics.kernels.panel_contacts`.
+facing features, or with ``contact.pressure`` a pressure over it) is
+:func:`panel_deploy.dynamics.kernels.panel_contacts`.
 
 The rule that separates pressing from collision: a collision is
 interference deeper than ``collision.tolerance`` (0.1 mm by default, the
@@ -102,13 +103,15 @@ def stowed_contacts(model: Model, pairs=None, reach: float = 0.0) -> tuple:
 
 def with_panel_contacts(model: Model, k_p: float, c_p: float, pairs=None,
                         reach: float | None = 0.0, mu_p: float = 0.0,
-                        friction_speed: float = 1.0e-3) -> Model:
+                        friction_speed: float = 1.0e-3, pressure: bool = False) -> Model:
     """``model`` with contacts of stiffness k_p (N/m), damping c_p (N s/m)
     and Coulomb friction coefficient mu_p, viscous below ``friction_speed``
     (m/s), between ``pairs`` (default ``model.collision_pairs``, the
     unhinged ones): all of them for ``reach`` None, else those that touch in
-    the stowed stacks within ``reach`` (m, :func:`stowed_contacts`)."""
+    the stowed stacks within ``reach`` (m, :func:`stowed_contacts`). Faces
+    push at the corners of their overlap, or with ``pressure`` over it
+    (``Model.contact_pressure``)."""
     chosen = (tuple((int(a), int(b)) for a, b in (model.collision_pairs if pairs is None else pairs))
               if reach is None else stowed_contacts(model, pairs, reach))
     return replace(model, contact_pairs=chosen, k_p=float(k_p), c_p=float(c_p), mu_p=float(mu_p),
-                   friction_speed=float(friction_speed))
+                   friction_speed=float(friction_speed), contact_pressure=bool(pressure))

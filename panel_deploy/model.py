@@ -245,7 +245,14 @@ class Model:
         Unhinged body pairs near each other in the stowed stacks, i < j: the
         panel contacts of :mod:`panel_deploy.contacts` (default: none).
     k_p, c_p : float
-        Normal stiffness (N/m) and damping (N s/m) of a panel contact.
+        Normal stiffness (N/m) and damping (N s/m) of a panel contact: of
+        a face pressed evenly on another.
+    contact_pressure : bool
+        How a panel contact's faces push: False (default), springs of k_p /
+        4 and c_p / 4 at the corners of their overlap; True, a pressure in
+        proportion to the depth over the overlap (k_p and c_p over the
+        smaller face's area), continuous in the pose
+        (:func:`panel_deploy.boxes.contact`).
     mu_p, friction_speed : float
         Coulomb friction coefficient of a panel contact (0, default: none)
         and the slip speed (m/s) below which its friction is viscous
@@ -275,6 +282,7 @@ class Model:
     contact_pairs: tuple = ()
     k_p: float = 0.0
     c_p: float = 0.0
+    contact_pressure: bool = False
     mu_p: float = 0.0
     friction_speed: float = 1.0e-3
     stop_ramp: float = 0.0

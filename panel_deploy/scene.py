@@ -369,6 +369,8 @@ class ContactSection:
                       "normal stiffness of one panel-to-panel contact pressed evenly")
     c_p: float = spec(280.0, number(0.0, 1e8, why=_WHY_STIFF), "N s/m",
                       "normal damping of one panel-to-panel contact")
+    pressure: bool = spec(False, boolean, "", "faces push by a pressure over their overlap, in "
+                          "proportion to depth (continuous in the pose), not by springs at its corners")
     friction: float = spec(0.0, number(0.0, 10.0, why="Coulomb coefficients of solids are below ~2"), "",
                            "Coulomb friction coefficient of panel-to-panel contact (0: the panels "
                            "slide freely, and the friction code is left out)")

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .dynamics.kernels import loop_residual
-from .dynamics.pack import kinematic_part, pack
+from .dynamics.pack import pack
 from .model import hinge_order
 from .errors import TrajectoryError
 from .model import Model
@@ -63,7 +63,7 @@ class LoopSolver:
 
     def __init__(self, model: Model, measured):
         self.model = model
-        self._packed = kinematic_part(pack(model))
+        self._packed = pack(model)
         order = hinge_order(model)
         names = [model.hinges[h].name for h in order]
         measured = set(measured)

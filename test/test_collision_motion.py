@@ -113,11 +113,11 @@ def test_pair_speeds_are_the_corners_speeds_seen_from_each_body(paper):
     """V of each view is the largest speed of the corners of one body in the
     other's frame, by central differences of forward kinematics."""
     from panel_deploy.dynamics.kernels import body_states
-    from panel_deploy.dynamics.pack import kinematic_part, pack
+    from panel_deploy.dynamics.pack import pack
 
     pairs = np.asarray(paper.collision_pairs)
     bound, rows = PairSpeedBound(paper, pairs), np.arange(len(pairs))
-    packed, dt = kinematic_part(pack(paper)), 1e-6
+    packed, dt = pack(paper), 1e-6
     for seg in random_segments(paper, np.random.default_rng(13), 3):
         theta, omega = seg(0.02)
         V = bound.speeds(*body_states(packed, theta, omega), rows)

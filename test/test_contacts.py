@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from panel_deploy.boxes import contact, scratch
+from panel_deploy.boxes import FACE_POINTS, contact, scratch
 from panel_deploy.build import build_model
 from panel_deploy.collision import check_trajectory
 from panel_deploy.collision.geometry import box_signed_distance
 from panel_deploy.contacts import stowed_contacts, with_panel_contacts
 from panel_deploy.dynamics import kernels, simulate
-from panel_deploy.dynamics.pack import FACE_POINTS, pack
+from panel_deploy.dynamics.pack import pack
 from panel_deploy.export import export_mjcf
 from panel_deploy.kinematics import forward_kinematics
 from panel_deploy.model import Body, Hinge, Model, State, box_inertia
@@ -36,8 +36,106 @@ FIRST_TOUCHES = ({"r1c2+r1c3", "r2c4"}, {"r4c1", "r4c4"})
 def points_of(Ra, ca, ha, Rb, cb, hb):
     work = scratch()
     count, normal = contact(Ra, np.asarray(ca, float), ha, Rb, np.asarray(cb, float), hb, work)
-    order = np.lexsort(work[-2][:count].T[::-1])
-    return count, np.array(normal), work[-2][:count][order], work[-1][:count][order]
+    order = np.lexsort(work[-3][:count].T[::-1])
+    assert np.all(work[-1][:count] == 1 / FACE_POINTS)
+    return count, np.array(normal), work[-3][:count][order], work[-2][:count][order]
+
+
+def pressed_of(Ra, ca, ha, Rb, cb, hb):
+    """:func:`contact` with a pressure over the overlap: normal, points, depths, weights."""
+    work = scratch()
+    count, normal = contact(Ra, np.asarray(ca, float), ha, Rb, np.asarray(cb, float), hb, work, True)
+    return np.array(normal), work[-3][:count].copy(), work[-2][:count].copy(), work[-1][:count].copy()
+
+
+def overlap_area(Ra, ca, Rb, cb):
+    """Area (m^2) and centroid (x, y) of the overlap of the top face of a and
+    the bottom face of b (both HALF, faces along z), by scipy's half-space
+    intersection: each face's four sides are half-planes of the (x, y) plane."""
+    from scipy.spatial import ConvexHull, HalfspaceIntersection
+    planes = []
+    for R, c in ((Ra, ca), (Rb, cb)):
+        for axis, half in ((0, HALF[0]), (1, HALF[1])):
+            u = R[:2, axis] / np.linalg.norm(R[:2, axis])
+            for sign in (1.0, -1.0):  # sign u . x - (sign u . c + half) <= 0
+                planes.append([*(sign * u), -(sign * u @ np.asarray(c)[:2] + half)])
+    inside = HalfspaceIntersection(np.array(planes), np.asarray(ca)[:2] * 0.5 + np.asarray(cb)[:2] * 0.5)
+    hull = ConvexHull(inside.intersections)
+    x, y = inside.intersections[hull.vertices].T  # counter-clockwise
+    cross = x * np.roll(y, -1) - np.roll(x, -1) * y
+    centroid = np.array([((x + np.roll(x, -1)) * cross).sum(), ((y + np.roll(y, -1)) * cross).sum()])
+    return hull.volume, centroid / (3 * cross.sum())
+
+
+def test_faces_pressed_evenly_push_by_a_pressure_over_their_overlap():
+    """Pressed 0.1 mm evenly, b turned about the normal and moved aside: the
+    weights sum to the overlap's share of a face's area (scipy's half-space
+    intersection) and the points' centroid is the overlap's, at every turn,
+    where the corners press by turns at 4 to 8 points, each with k_p / 4."""
+    depth, face = 1e-4, 4 * HALF[0] * HALF[1]
+    counts = set()
+    for turn in np.linspace(0.0, 0.6, 13):
+        Rb = Rotation.from_rotvec([0, 0, turn]).as_matrix()
+        cb = np.array([0.02, 0.01, 2 * HALF[2] - depth])
+        n, points, depths, weights = pressed_of(np.eye(3), (0, 0, 0), HALF, Rb, cb, HALF)
+        np.testing.assert_allclose(n, [0, 0, 1])
+        np.testing.assert_allclose(depths, depth, rtol=1e-9)
+        area, centroid = overlap_area(np.eye(3), np.zeros(3), Rb, cb)
+        assert weights.sum() == pytest.approx(area / face, rel=1e-9)
+        np.testing.assert_allclose(weights @ points[:, :2] / weights.sum(), centroid, atol=1e-12)
+        counts.add(points_of(np.eye(3), (0, 0, 0), HALF, Rb, cb, HALF)[0])
+    assert len(counts) > 1
+
+
+def test_a_tilted_face_pushes_the_pressure_integral_and_its_moment():
+    """b tilted about y within the FEATURE band, pressing only along part of
+    a's face: the depth d(x) = d0 - x tan(tilt) cut at d = 0. The weights
+    times depth integrate d over the pressed part, and times x its moment,
+    to rounding: integral_x0^a d(x) 2 h_y dx over the face's area."""
+    tilt, d0 = 2e-3, 2e-5
+    Rb = Rotation.from_rotvec([0, tilt, 0]).as_matrix()
+    cb = np.array([0.0, 0.0, HALF[2] - d0]) + Rb @ [0.0, 0.0, HALF[2]]
+    n, points, depths, weights = pressed_of(np.eye(3), (0, 0, 0), HALF, Rb, cb, HALF)
+    # b's lower face is the plane through cb - h_z Rb e_z: its height over x
+    normal_b, point_b = Rb[:, 2], cb - HALF[2] * Rb[:, 2]
+    height = lambda x: point_b[2] - normal_b[0] * (x - point_b[0]) / normal_b[2]  # noqa: E731
+    slope = height(1.0) - height(0.0)
+    d = lambda x: HALF[2] - height(x)  # noqa: E731
+    x0 = max(-HALF[0], (HALF[2] - height(0.0)) / slope)  # where d = 0
+    assert -HALF[0] < x0 < HALF[0]  # pressed on part of the face
+    a, width = HALF[0], 2 * HALF[1]
+    push = width * (d(x0) * (a - x0) + (d(a) - d(x0)) * (a - x0) / 2)
+    moment = width * (d(0.0) * (a ** 2 - x0 ** 2) / 2 - slope * (a ** 3 - x0 ** 3) / 3)
+    face = 4 * HALF[0] * HALF[1]
+    assert np.all(depths > 0)
+    assert (weights * depths).sum() * face == pytest.approx(push, rel=1e-5)
+    assert (weights * depths * points[:, 0]).sum() * face == pytest.approx(moment, rel=1e-5)
+
+
+def test_a_pressure_over_the_overlap_is_continuous_as_corners_cross():
+    """b on a, aside and turning about the normal through the turns where
+    its corners cross a's edges: with the corners' springs the push jumps
+    there (by k_p / 4 d per corner, whatever the spacing); the pressure's
+    largest change between neighbouring turns shrinks with the spacing."""
+    depth, k = 1e-4, 1e7
+    cb = np.array([0.03, 0.02, 2 * HALF[2] - depth])
+
+    def push(turn, pressure):
+        Rb = Rotation.from_rotvec([0, 0, turn]).as_matrix()
+        if pressure:
+            _, _, depths, weights = pressed_of(np.eye(3), (0, 0, 0), HALF, Rb, cb, HALF)
+        else:
+            _, _, _, depths = points_of(np.eye(3), (0, 0, 0), HALF, Rb, cb, HALF)
+            weights = np.full(len(depths), 1 / FACE_POINTS)
+        return sum(kernels._contact_law(d, 0.0, w * k, 0.0)[0] for d, w in zip(depths, weights))
+
+    for pressure in (False, True):
+        steps = [np.abs(np.diff([push(t, pressure) for t in np.linspace(-0.4, 0.4, m)])).max()
+                 for m in (801, 8001)]
+        if pressure:
+            assert steps[1] < 0.2 * steps[0], steps
+        else:
+            assert steps[1] > 0.5 * k * depth / FACE_POINTS, steps  # a corner's push, at any spacing
 
 
 def test_faces_pressed_flat_touch_at_the_corners_of_their_overlap():
@@ -157,7 +255,7 @@ def test_the_contact_pairs_are_the_unhinged_pairs_within_reach():
     assert len(touching) == 10 and set(paper_model("contact.reach=0").contact_pairs) == touching
     assert stowed_contacts(model) == paper_model("contact.reach=0").contact_pairs
     assert paper_model("contact.panels=false").contact_pairs == ()
-    assert pack(paper_model("contact.panels=false")).contact is None
+    assert pack(paper_model("contact.panels=false")).contact.shape == (0, 13)
 
 
 def resting_panel(k_p, c_p, lever):
@@ -193,10 +291,34 @@ def test_a_panel_resting_on_another_presses_in_as_the_law_says():
     assert abs(result.omega[-1, 0]) < 1e-6
 
 
-def test_a_panel_dropped_on_another_bounces_back_with_its_energy():
+def test_a_panel_resting_on_another_presses_in_by_the_pressure_the_law_says():
+    """Static closed form with a pressure over the face (``contact_pressure``):
+    at lever L from the hinge, L in [D - a, D + a], the face presses in by phi
+    L with the pressure (k_p / A)(phi L - D_r / 2) of the law past its ramp,
+    A = 4 a b its area; its moment about the hinge, (k_p / 2a) [phi L^3 / 3 -
+    D_r L^2 / 4] from D - a to D + a, carries the weight at lever D. The
+    quadrature is exact here: the moment's integrand is quadratic."""
+    k_p, lever, m, g = 1e4, 1.0, 0.02, 9.81
+    model = dataclasses.replace(resting_panel(k_p, 100.0, lever), contact_pressure=True)
+    settings = SimulationSection(t_end=0.4, samples=5, method="DOP853", rtol=1e-8, atol=1e-12)
+    result = simulate(model, settings)
+    assert result.success, result.message
+    ramp, a = kernels.CONTACT_RAMP, HALF[0]
+    near, far = lever - a, lever + a
+    phi = (2 * a * m * g * lever / k_p + ramp / 4 * (far ** 2 - near ** 2)) / ((far ** 3 - near ** 3) / 3)
+    assert phi * near > ramp  # pressed past the ramp everywhere: the closed form holds
+    assert result.theta[-1, 0] == pytest.approx(phi, rel=1e-4)
+    # the corners' springs hold it at another angle: the test tells the two apart
+    corners = (m * g * lever / (k_p / 2) + ramp / 2 * (near + far)) / (near ** 2 + far ** 2)
+    assert abs(corners / phi - 1) > 1e-3
+    assert abs(result.omega[-1, 0]) < 1e-6
+
+
+@pytest.mark.parametrize("pressure", [False, True], ids=["corners", "pressure"])
+def test_a_panel_dropped_on_another_bounces_back_with_its_energy(pressure):
     """Without damping the contact stores and returns the fall's energy: the
     panel lifts off again, and the energy balance holds."""
-    model = resting_panel(1e5, 0.0, 0.5)
+    model = dataclasses.replace(resting_panel(1e5, 0.0, 0.5), contact_pressure=pressure)
     settings = SimulationSection(t_end=0.08, samples=801, method="DOP853", rtol=1e-9, atol=1e-13)
     state = State.stowed(model)
     state.theta[:] = -2e-3  # lifted 1 mm at the centre

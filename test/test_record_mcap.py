@@ -104,6 +104,7 @@ def test_mcap_reader_summary_counts_and_chunks(recorded):
     assert json.loads(meta["model"]["stop_ramp"]) == 0.0  # and the paper's joint stops
     assert json.loads(meta["model"]["panel_contacts"]) == len(model.contact_pairs) == 0  # no panel contact
     assert json.loads(meta["model"]["friction"]) == 0.0
+    assert json.loads(meta["model"]["contact_pressure"]) is False
     assert yaml.safe_load(meta["scene"]["yaml"])["name"] == "paper_4x4"
     assert meta["run"]["version"] and meta["run"]["wall_time"]
     bag = yaml.safe_load(meta["rosbag2"]["serialized_metadata"])

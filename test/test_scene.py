@@ -111,6 +111,7 @@ def test_defaults_and_density():
     ("contact.friction_speed", 0, "contact.friction_speed: expected a number > 0, got 0"),
     ("contact.friction_speed", 1e-9, "contact.friction_speed: expected a number >= 1e-06, got 1e-09"),
     ("contact.friction_speed", float("inf"), "contact.friction_speed: expected a finite number"),
+    ("contact.pressure", "yes", "contact.pressure: expected true or false, got str"),
     ("velocity", 3, "velocity: unknown section"),
 ])
 def test_bad_values_name_the_key(path, value, expected):
@@ -154,8 +155,18 @@ def test_friction_is_off_by_default_and_reaches_the_model():
     sets["contact"]["friction_speed"] = 0.002
     model = build_model(scene_from_dict(sets))
     assert (model.mu_p, model.friction_speed) == (0.4, 0.002)
-    assert model.contact_pairs and np.all(pack(model).contact[:, 10:] == [0.4, 0.002])
+    assert model.contact_pairs and np.all(pack(model).contact[:, 10:] == [0.4, 0.002, 0.0])
     assert "contact.friction" in describe_schema() and "contact.friction_speed" in describe_schema()
+
+
+def test_contact_pressure_is_off_by_default_and_reaches_the_model():
+    from panel_deploy.build import build_model
+    from panel_deploy.dynamics.pack import pack
+    assert scene_from_dict(MINIMAL).contact.pressure is False
+    assert not build_model(scene_from_dict(MINIMAL)).contact_pressure
+    model = build_model(scene_from_dict(with_("contact.pressure", True)))
+    assert model.contact_pressure and model.contact_pairs and np.all(pack(model).contact[:, 12] == 1.0)
+    assert "contact.pressure" in describe_schema()
 
 
 def test_cli_bad_air_is_one_line_before_any_work(capsys):

@@ -113,7 +113,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from numba import njit
 
-from ..dynamics.pack import kinematic_part, pack
+from ..dynamics.pack import pack
 from ..dynamics.simulate import body_states
 from ..errors import SceneError, TrajectoryError, shown
 from ..model import Model
@@ -353,7 +353,7 @@ class CollisionMonitor:
         self.collision = collision or CollisionSettings()
         self.pairs = np.array(model.collision_pairs, dtype=int).reshape(-1, 2)
         self._a, self._b = (np.ascontiguousarray(self.pairs[:, k], dtype=np.int64) for k in (0, 1))
-        self._packed = kinematic_part(pack(model))
+        self._packed = pack(model)
         self._boxes = BoxSet(model)
         self._scratch = BoxSet(model)
         self._speed = PairSpeedBound(model, self.pairs)

@@ -816,10 +816,9 @@ def air_drag(P, air, R, p, w, vo, f):
     """Subtract the air drag wrench of every body from its row of f (n + 1, 6),
     the bias wrenches about the ground origin; returns the power dissipated, W.
 
-    ``air`` is ``P.air``, passed apart so that numba types None (no air) as
-    the argument and prunes the rest of the function.
+    ``air`` is ``P.air`` (no rows without air).
     """
-    if air is None:
+    if air.shape[0] == 0:
         return 0.0
     power = 0.0
     for i in range(P.n):
@@ -900,8 +899,8 @@ NEAR_MARGIN = 0.005
 
 @njit(cache=True)
 def near_pairs(P, contact):
-    """An empty candidate list of the pairs of ``contact`` (``P.contact``, passed
-    apart so that numba prunes it for None) for :func:`rhs`, a tuple:
+    """An empty candidate list of the pairs of ``contact`` (``P.contact``) for
+    :func:`rhs`, a tuple:
 
     0. the :func:`_boxes` it was built at (n + 1, 2, 3), NaN until its first use;
     1. the listed pairs' rows (q,) and 2. their count (1,);
@@ -914,9 +913,7 @@ def near_pairs(P, contact):
     Mutable scratch of one run, never shared between runs: it only spares
     :func:`panel_contacts` the tests of pairs that cannot touch, so a run
     gives the same result to the bit with it as without."""
-    q = 0
-    if contact is not None:
-        q = contact.shape[0]
+    q = contact.shape[0]
     return (np.full((P.n + 1, 2, 3), np.nan), np.empty(q, np.int64), np.zeros(1, np.int64),
             np.zeros(q, np.int64), np.empty((P.n + 1, 3, 3)), np.empty((P.n + 1, 3)),
             np.empty(P.n + 1), np.full(q, -np.inf))
@@ -1008,10 +1005,11 @@ def _touching(P, contact, R, p, near):
 def _pair_points(P, contact, r, R, p, work):
     """Contact points of pair r of ``P.contact`` (:func:`boxes.contact`): their
     number and the normal from the pair's first body towards its second;
-    points and depths are left in work; callers first skip the pairs
-    :func:`_touching` rules out."""
+    points, depths and weights are left in work; callers first skip the
+    pairs :func:`_touching` rules out."""
     a, b = int(contact[r, 0]), int(contact[r, 1])
-    return contact_of_boxes(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], work)
+    return contact_of_boxes(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], work,
+                            contact[r, 12] != 0.0)
 
 
 @njit(cache=True)
@@ -1024,32 +1022,33 @@ def panel_contacts(P, contact, R, p, w, vo, f, near):
     :func:`panel_deploy.boxes.contact`) at depth d > 0, approaching at s (the
     normal speed of the pair's first body's point there relative to the
     second's), a push ``max(0, k d + c s)`` along the normal on the two
-    bodies, k and c its share of k_p and c_p: a spring and damper that never
+    bodies, k and c its weight's share of k_p and c_p: a spring and damper that never
     pulls (one that pulled would glue parting panels together), both coming
     in over the first ``CONTACT_RAMP`` of depth (:func:`_contact_law`). The
     spring stores its energy; the rest of the push's work, (push - spring) s
     >= 0, is dissipated (s is d's rate up to the motion of the point).
     With a friction coefficient mu (``contact[r, 10]``) > 0, the point's
     :func:`_friction` opposes the slip, and dissipates all its work.
-    ``contact`` is ``P.contact``, passed apart so numba prunes this for None;
+    ``contact`` is ``P.contact`` (no rows without panel contact);
     ``near`` the run's candidate list (:func:`near_pairs`).
     """
-    if contact is None:
+    if contact.shape[0] == 0:
         return 0.0, 0.0
     energy = 0.0
     power = 0.0
     work = box_scratch()
-    points, depths = work[-2], work[-1]
+    points, depths, weights = work[-3], work[-2], work[-1]
     for r in _touching(P, contact, R, p, near):
         count, normal = _pair_points(P, contact, r, R, p, work)
         a, b = int(contact[r, 0]), int(contact[r, 1])
-        k, c, mu, v_f = contact[r, 8], contact[r, 9], contact[r, 10], contact[r, 11]
+        mu, v_f = contact[r, 10], contact[r, 11]
         for q in range(count):
             depth = depths[q]
             x = (points[q, 0], points[q, 1], points[q, 2])
             relative = _sub(_point_velocity(w, vo, a, x), _point_velocity(w, vo, b, x))
             speed = _dot(normal, relative)
-            push, spring, e, _, _ = _contact_law(depth, speed, k, c)
+            push, spring, e, _, _ = _contact_law(depth, speed, weights[q] * contact[r, 8],
+                                                 weights[q] * contact[r, 9])
             energy += e
             power += (push - spring) * speed
             force = _scale(normal, push)  # on b, as the friction: f holds minus the force on a
@@ -1095,12 +1094,12 @@ def contact_onsets(P, contact, y, t, record, near):
     one point pressing a step before its four), and a pair resting in light contact can
     still be struck. ``near``: the run's candidate list (:func:`near_pairs`).
     """
-    if contact is None:
+    if contact.shape[0] == 0:
         return
     n = P.n
     R, p, w, vo, _ = kinematics(P, y[:n], y[n:2 * n])
     work = box_scratch()
-    points, depths = work[-2], work[-1]
+    points, depths = work[-3], work[-2]
     for r in _touching(P, contact, R, p, near):
         count, normal = _pair_points(P, contact, r, R, p, work)
         a, b = int(contact[r, 0]), int(contact[r, 1])
@@ -1321,26 +1320,26 @@ def _outer_add(out, scale, u):
 @njit(cache=True)
 def _pressed_points(P, contact, R, p, near):
     """The panel contact points pressed (depth > 0) at poses (R, p): (count,
-    rows), row i < count ``[pair, normal (3), point (3, m), depth (m)]``, so that
-    the separating axes run once a call, not once to count and again to fill.
-    ``near``: the run's candidate list (:func:`near_pairs`)."""
-    rows = np.empty((64, 8))
+    rows), row i < count ``[pair, normal (3), point (3, m), depth (m), weight]``,
+    so that the separating axes run once a call, not once to count and again
+    to fill. ``near``: the run's candidate list (:func:`near_pairs`)."""
+    rows = np.empty((64, 9))
     count = 0
-    if contact is None:
+    if contact.shape[0] == 0:
         return count, rows
     work = box_scratch()
-    points, depths = work[-2], work[-1]
+    points, depths, weights = work[-3], work[-2], work[-1]
     for r in _touching(P, contact, R, p, near):
         found, normal = _pair_points(P, contact, r, R, p, work)
         if count + found > rows.shape[0]:
-            grown = np.empty((2 * rows.shape[0] + found, 8))
+            grown = np.empty((2 * rows.shape[0] + found, 9))
             grown[:count] = rows[:count]
             rows = grown
         for q in range(found):
             rows[count, 0] = r
             rows[count, 1], rows[count, 2], rows[count, 3] = normal
             rows[count, 4], rows[count, 5], rows[count, 6] = points[q, 0], points[q, 1], points[q, 2]
-            rows[count, 7] = depths[q]
+            rows[count, 7], rows[count, 8] = depths[q], weights[q]
             count += 1
     return count, rows
 
@@ -1349,7 +1348,7 @@ def _pressed_points(P, contact, R, p, near):
 def _contact_row_count(contact, pressed):
     """Rows of U that :func:`_contact_rows` writes: one per pressed point, two
     more where its pair has friction."""
-    if contact is None:
+    if contact.shape[0] == 0:
         return 0
     count, rows = pressed
     out = count
@@ -1367,14 +1366,15 @@ def _contact_rows(P, contact, pressed, S, U, kk, cc, start):
     gains ``k G^T G`` (C likewise); then, for a point with friction, its two
     slip directions with :func:`_friction`'s damping at zero slip, mu times
     the spring's push over the friction speed."""
-    if contact is None:
+    if contact.shape[0] == 0:
         return
     count, rows = pressed
     Jp = np.empty((3, P.n))
     extra = start + count
     for i in range(count):
         r = int(rows[i, 0])
-        push, _, _, k, c = _contact_law(rows[i, 7], 0.0, contact[r, 8], contact[r, 9])
+        weight = rows[i, 8]
+        push, _, _, k, c = _contact_law(rows[i, 7], 0.0, weight * contact[r, 8], weight * contact[r, 9])
         kk[start + i], cc[start + i] = k, c
         x = (rows[i, 4], rows[i, 5], rows[i, 6])
         Jp[:] = 0.0

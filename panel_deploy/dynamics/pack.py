@@ -61,21 +61,24 @@ class Packed(NamedTuple):
         m/s^2.
     has_gravity : bool
         False when gravity is zero, so the kernels skip all gravity work.
-    air : (n, 3) float, or None without air
+    air : (n, 3) float, or (0, 3) without air
         Per body: half length and half width of its large faces (m), and
         1/2 rho C_d (kg/m^3), the face pressure per (m/s)^2 of normal
-        velocity. None when the model has no air: numba then compiles the
-        kernels without the drag code (a flag or an empty array kept it, and
-        cost a run without air 5-9 % in speed).
+        velocity.
     half : (n + 1, 3) float
         Half sizes of each body's box along its own axes, m (ground last).
-    contact : (q, 12) float, or None without panel contacts
+    contact : (q, 13) float, q = 0 without panel contacts
         One row per pair of :attr:`Model.contact_pairs`: its bodies (kernel
-        indices, as floats), their half edges (m, 3 + 3), the stiffness
-        (N/m) and damping (N s/m) of each of its contact points, a quarter of
-        k_p and c_p (a face pressed evenly has four), and its friction
-        coefficient mu_p and friction speed (m/s). None, like ``air``, so
-        that numba leaves the contact code out.
+        indices, as floats), their half edges (m, 3 + 3), k_p (N/m) and c_p
+        (N s/m), of which each contact point takes its weight's share
+        (:func:`panel_deploy.boxes.contact`), its friction coefficient mu_p
+        and friction speed (m/s), and 1 where its faces push by a pressure
+        over their overlap (``Model.contact_pressure``), else 0.
+
+    ``air`` and ``contact`` have no rows, not None, when the model has none:
+    numba types a None field and an array apart, and compiled every kernel
+    that takes a Packed once for each kind of model (262 of the install's
+    462 s of compiling went to the air and contact kinds).
     """
 
     n: int
@@ -109,9 +112,9 @@ class Packed(NamedTuple):
     regularisation: float
     gravity: np.ndarray
     has_gravity: bool
-    air: np.ndarray | None
+    air: np.ndarray
     half: np.ndarray
-    contact: np.ndarray | None
+    contact: np.ndarray
 
 
 def _normal(axis):
@@ -121,21 +124,17 @@ def _normal(axis):
     return e / np.linalg.norm(e)
 
 
-#: Contact points of a face pressed flat on another: its k_p and c_p are shared by them.
-FACE_POINTS = 4
-
-
-def _contact_rows(model: Model, index: dict) -> np.ndarray | None:
+def _contact_rows(model: Model, index: dict) -> np.ndarray:
     """Packed.contact of ``model``."""
     if not model.contact_pairs:
-        return None
+        return np.zeros((0, 13))
     # whole columns, not a list per pair: a 10 x 10 array has 3569 pairs,
     # which pair by pair took 30 ms of every run's set-up
     a, b = np.array(model.contact_pairs).T
     half = 0.5 * np.array([body.size for body in model.bodies])
     kernel = np.array([index[i] for i in range(len(model.bodies))])
-    k = np.full((len(a), 4), [model.k_p / FACE_POINTS, model.c_p / FACE_POINTS, model.mu_p,
-                              model.friction_speed])
+    k = np.full((len(a), 5), [model.k_p, model.c_p, model.mu_p, model.friction_speed,
+                              float(model.contact_pressure)])
     return np.column_stack([kernel[a], kernel[b], half[a], half[b], k]).astype(float)
 
 
@@ -189,16 +188,8 @@ def pack(model: Model) -> Packed:
         gravity=gravity,
         has_gravity=bool(np.any(gravity != 0.0)),
         air=np.array([[*(0.5 * model.bodies[b].size[:2]), drag] for b in body_of],
-                     dtype=float).reshape(n, 3) if drag > 0.0 else None,
+                     dtype=float).reshape(n, 3) if drag > 0.0 else np.zeros((0, 3)),
         half=f3([0.5 * model.bodies[b].size for b in body_of + [model.ground]]),
         contact=_contact_rows(model, index),
     )
 
-
-def kinematic_part(P: Packed) -> Packed:
-    """``P`` without its air and panel contacts (``air`` and ``contact`` None):
-    all that the kinematics, the loop residuals and the collision check read.
-    numba types a None field and an array field apart, so the kernels they
-    call compile once for every kind of model instead of once for each.
-    """
-    return P._replace(air=None, contact=None)

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..model import FLAT_TOLERANCE, Model, hinge_order
 from .kernels import cut_rates, hinge_law
-from .pack import kinematic_part, pack
+from .pack import pack
 from .result import ENERGY_FLOOR, SimulationResult
 
 #: A hinge has left its stowed angle once |theta - theta_stowed| exceeds this, rad.
@@ -43,7 +43,7 @@ def hinge_states(model: Model, result: SimulationResult, packed=None):
     omega = np.empty((s, len(idx)))
     omega[:, :model.n_coords] = result.omega
     if model.cut_hinges:
-        P = kinematic_part(pack(model) if packed is None else packed)
+        P = pack(model) if packed is None else packed
         for j in range(s):
             omega[j, model.n_coords:] = cut_rates(P, result.rotation[j, P.body],
                                                   result.angular_velocity[j, P.body])

@@ -13,7 +13,7 @@ from ..errors import ModelError
 from ..model import Model, State
 from . import kernels
 from .integrate import integrate_blocks
-from .pack import kinematic_part, pack
+from .pack import pack
 from .report import total_energy
 from .result import ENERGY_FLOOR, ENERGY_LIMIT, SimulationResult, Status
 
@@ -204,15 +204,14 @@ def _result(P, t, run, method, wall, gap_limit) -> SimulationResult:
     gaps = np.zeros(s)
     names = ("kinetic", "spring", "gravity", "dissipated", "constraint_work")
     energy = {k: np.empty(s) for k in names}
-    K = kinematic_part(P)
     for j, y in enumerate(Y):
-        R[j], p[j], v[j], w[j] = body_states(K, y[:n], y[n:2 * n])
+        R[j], p[j], v[j], w[j] = body_states(P, y[:n], y[n:2 * n])
         kin, spring, grav, gaps[j], J = kernels.observe(P, y)
         energy["kinetic"][j], energy["spring"][j], energy["gravity"][j] = kin, spring, grav
         energy["dissipated"][j], energy["constraint_work"][j] = y[2 * n], y[2 * n + 1]
         if m:
             sigma[j] = np.linalg.svd(J, compute_uv=False)[::-1][:k_sigma]
-            cut_theta[j] = kernels.cut_angles(K, R[j, P.body])  # kernel body order
+            cut_theta[j] = kernels.cut_angles(P, R[j, P.body])  # kernel body order
     return SimulationResult(
         t=t, theta=Y[:, :n].copy(), omega=Y[:, n:2 * n].copy(),
         rotation=R, position=p, linear_velocity=v, angular_velocity=w,

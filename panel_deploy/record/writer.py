@@ -284,6 +284,7 @@ def model_record(model) -> dict:
             "gravity": [float(g) for g in model.gravity],
             "air_density": model.air.density, "drag_coefficient": model.air.drag_coefficient,
             "panel_contacts": len(model.contact_pairs), "k_p": model.k_p, "c_p": model.c_p,
+            "contact_pressure": model.contact_pressure,
             "friction": model.mu_p, "friction_speed": model.friction_speed}
 
 

@@ -546,7 +546,15 @@ TOP_LEVEL = {"gravity": (vector3, "m/s^2", "gravity in the flat array frame (y t
              "calibration": (None, "", "informational: how values were calibrated (any mapping)")}
 
 
-def _parse_section(cls, data, path):
+def parse_section(cls, data, path):
+    """The section ``cls`` of a scene from its mapping ``data`` (None: every
+    key's default), each key parsed and checked as in a scene file.
+
+    Raises
+    ------
+    SceneError
+        Naming ``path.<key>`` and what was wrong.
+    """
     if data is None:
         data = {}
     if not isinstance(data, dict):
@@ -583,7 +591,7 @@ def scene_from_dict(data: dict, source: str | None = None) -> Scene:
             raise SceneError(key, f"unknown section (expected one of {', '.join([*SECTIONS, *TOP_LEVEL])})")
     if "array" not in data:
         raise SceneError("array", "required section is missing")
-    sections = {name: _parse_section(cls, data.get(name), name) for name, cls in SECTIONS.items()}
+    sections = {name: parse_section(cls, data.get(name), name) for name, cls in SECTIONS.items()}
     arr = sections["array"]
     _check_required(arr, "array", ("rows", "cols", "length", "width", "thickness"))
     if (arr.mass is None) == (arr.density is None):

@@ -9,7 +9,7 @@ import yaml
 from . import contract
 from .errors import SceneError
 from .model import Model
-from .scene import Scene, apply_overrides, scene_from_dict
+from .scene import OptimisationSection, Scene, apply_overrides, parse_section, scene_from_dict
 from .validate import load_yaml, yaml_problem
 
 
@@ -62,10 +62,28 @@ def optimisation_scene(scene: Scene, **overrides) -> Scene:
     SceneError
         Naming ``optimisation.<key>`` and what was wrong.
     """
-    given = {k: v for k, v in overrides.items() if v is not None and v != () and v != ""}
     data = apply_overrides(scene.data, [f"optimisation.{k}={yaml_value(v)}"
-                                        for k, v in given.items()])
+                                        for k, v in _given(overrides).items()])
     return scene_from_dict(data, source=scene.source)
+
+
+def check_optimisation(**overrides) -> None:
+    """Check ``optimisation`` keys as :func:`optimisation_scene` does, before
+    any scene is known (a node without a model yet): each key on its own, as
+    in a scene file.
+
+    Raises
+    ------
+    SceneError
+        Naming ``optimisation.<key>`` and what was wrong.
+    """
+    given = {k: list(v) if isinstance(v, tuple) else v for k, v in _given(overrides).items()}
+    parse_section(OptimisationSection, given, "optimisation")
+
+
+def _given(overrides: dict) -> dict:
+    """The keys of ``overrides`` that are set (None or empty keeps the scene's value)."""
+    return {k: v for k, v in overrides.items() if v is not None and v != () and v != ""}
 
 
 def yaml_value(v) -> str:

@@ -24,7 +24,7 @@ from rclpy.parameter import Parameter
 from .. import contract
 from ..build import build_model
 from ..errors import SceneError, shown
-from ..scene_text import optimisation_scene
+from ..scene_text import check_optimisation, optimisation_scene
 from ..optimise import optimise
 from ..optimise.io import dump_result, result_to_dict
 from ..optimise.parallel import Cancelled
@@ -62,6 +62,8 @@ class OptimiserNode(runtime.WorkerNode):
         self._target_service(changes.get("target_node", self.get_parameter("target_node").value))
         if self.scene is not None:
             self._search_scene(changes)
+        else:  # no model yet: the keys on their own, so that none is taken unchecked
+            check_optimisation(**self._search_keys(changes))
 
     def _target_service(self, target: str) -> str:
         """The ``set_parameters`` service of ``target``, resolved in this node's namespace."""
@@ -74,11 +76,16 @@ class OptimiserNode(runtime.WorkerNode):
         raise SceneError("target_node", f"expected a node name such as dynamics or "
                                         f"/array1/dynamics, got {shown(target)}")
 
+    def _search_keys(self, changes=None) -> dict:
+        """The scene's ``optimisation`` keys these parameters (with ``changes``) set."""
+        p = {**runtime.values(self, PARAMETERS), **(changes or {})}
+        return dict(max_evaluations=p["max_evaluations"] or None, method=p["method"],
+                    damping_ratio_bounds=p["damping_ratio_bounds"],
+                    seed=None if p["seed"] < 0 else p["seed"])
+
     def _search_scene(self, changes=None):
         p = {**runtime.values(self, PARAMETERS), **(changes or {})}
-        return optimisation_scene(self.scene, max_evaluations=p["max_evaluations"] or None,
-                                  method=p["method"], damping_ratio_bounds=p["damping_ratio_bounds"],
-                                  seed=None if p["seed"] < 0 else p["seed"]), p
+        return optimisation_scene(self.scene, **self._search_keys(changes)), p
 
     def _optimise(self, goal_handle):
         scene, p = self._search_scene()

@@ -13,9 +13,11 @@ from pathlib import Path
 from uuid import uuid4
 
 import rclpy
+from action_msgs.msg import GoalStatusArray
 from rclpy.action import ActionClient
 from rclpy.action.client import ClientGoalHandle
 from rclpy.executors import MultiThreadedExecutor
+from rclpy.qos import qos_profile_action_status_default
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 from unique_identifier_msgs.msg import UUID
@@ -80,6 +82,7 @@ class Client:
         self.executor.add_node(self.node)
         self.received = {}
         self._clients = {}
+        self._listed = {}
         self._closing = threading.Event()
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
@@ -111,18 +114,35 @@ class Client:
     def trigger(self, service):
         return self.call(Trigger, service)
 
+    def _listed_goals(self, server: str) -> set:
+        """The goal ids (bytes) that the action server ``server`` has listed on
+        its status topic, kept up to date from the first call on."""
+        if server not in self._listed:
+            listed = self._listed[server] = set()
+            self.node.create_subscription(
+                GoalStatusArray, f"{server}/_action/status",
+                lambda msg: listed.update(bytes(s.goal_info.goal_id.uuid) for s in msg.status_list),
+                qos_profile_action_status_default)
+        return self._listed[server]
+
     def send_goal(self, action: contract.Service, node: str, timeout=60.0, **fields) -> "Goal":
         """A goal of ``action`` sent to the server of ``node`` (its full name), accepted.
 
         Sent again every ANSWER s while neither its answer nor its feedback has
-        come, as a service request is (:func:`_answered`); but a goal whose
-        answer was lost runs all the same, and sent again it would run twice (a
-        dynamics node then deployed twice and its clock went back, seen under
-        load). A goal whose feedback came is running: it is taken by its id,
-        not sent again.
+        come and the server does not list it, as a service request is
+        (:func:`_answered`); but a goal whose answer was lost runs all the same,
+        and sent again it would run twice (a dynamics node then deployed twice
+        and its clock went back, seen under load), or be aborted as one comes
+        while another runs. rclpy's client loses an answer that its executor
+        takes before ``send_goal_async`` has filed the request ("Ignoring
+        unexpected goal response"; a goal waiting for subscribers, sent again
+        after 10 s, so ended at once in CI). A goal whose feedback came, or
+        that the server lists on its status topic, is running: it is taken by
+        its id, not sent again.
         """
         action_type = messages.message_class(action.type)
         key = (action_type, f"{node}/{action.name}")
+        listed = self._listed_goals(key[1])
         if key not in self._clients:
             self._clients[key] = ActionClient(self.node, action_type, key[1])
         client = self._clients[key]
@@ -142,18 +162,21 @@ class Client:
         futures = [send()]
         end = time.monotonic() + timeout
         resend = time.monotonic() + ANSWER
-        while not any(f.done() for f in futures) and not running:
+        lost = []  # sent goals whose answer is overdue but that the server lists
+        while not any(f.done() for f in futures) and not running and not lost:
             assert time.monotonic() < end, f"{key[1]} did not answer"
             if time.monotonic() > resend:
-                futures.append(send())
+                lost = [g for g in sent if bytes(g.uuid) in listed]
+                if not lost:
+                    futures.append(send())
                 resend = time.monotonic() + ANSWER
             time.sleep(0.02)
         answered = [f for f in futures if f.done()]
         if answered:
             goal.start(answered[0].result())
-        else:  # its answer was lost: the goal its feedback names
+        else:  # its answer was lost: the goal its feedback or the server's status names
             accepted = action_type.Impl.SendGoalService.Response(accepted=True)
-            goal.start(ClientGoalHandle(client, running[0], accepted))
+            goal.start(ClientGoalHandle(client, (running or lost)[0], accepted))
         return goal
 
     def start_goal(self, action: contract.Service, node: str, **fields) -> "Goal":

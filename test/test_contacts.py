@@ -432,8 +432,9 @@ def test_friction_is_exported_to_mujoco_as_sliding_friction():
 
 @pytest.fixture(scope="module")
 def six_by_six():
-    """6 x 6, its first packing circuit, over 0.08 s with and without contact:
-    {"true"/"false": (scene, model, result)}."""
+    """6 x 6, its first packing circuit, over 0.08 s with and without contact,
+    and with contact by a pressure over the overlap:
+    {"true"/"false"/"pressure": (scene, model, result)}."""
     sys.path.insert(0, str(ROOT / "bench"))
     from bench_scaling import first_packing
 
@@ -441,8 +442,8 @@ def six_by_six():
     sets = ["array.rows=6", "array.cols=6", f"fold.circuit={n}", "fold.ground=null",
             "simulation.t_end=0.08", "simulation.samples=17"]
     runs = {}
-    for on in ("true", "false"):
-        scene = load_scene(PAPER, sets + [f"contact.panels={on}"])
+    for on, law in (("true", []), ("false", []), ("pressure", ["contact.pressure=true"])):
+        scene = load_scene(PAPER, sets + [f"contact.panels={on != 'false'}", *law])
         model = build_model(scene)
         runs[on] = scene, model, simulate(model, scene.simulation)
     return runs
@@ -450,7 +451,8 @@ def six_by_six():
 
 def test_the_stacks_of_a_6x6_array_no_longer_pass_through_each_other(six_by_six):
     """Without contact two panels side by side in one layer (r3c6, r4c2) press
-    into each other from 0.04 s; with it they push each other aside."""
+    into each other from 0.04 s; with it, at the corners or by a pressure over
+    the overlap, they push each other aside."""
     reports = {}
     for on, (scene, model, result) in six_by_six.items():
         assert result.success, result.message
@@ -458,6 +460,7 @@ def test_the_stacks_of_a_6x6_array_no_longer_pass_through_each_other(six_by_six)
     without = reports["false"].first_collision
     assert without is not None and set(without.names) == {"r3c6", "r4c2"} and without.t < 0.045
     assert not reports["true"].collided, reports["true"].to_text()
+    assert not reports["pressure"].collided, reports["pressure"].to_text()
 
 
 def test_the_fastest_press_is_the_fastest_onset_and_an_impact_from_the_impact_speed(six_by_six):
@@ -619,7 +622,8 @@ def test_mujoco_box_contacts_on_the_export_hold_the_stacks_as_ours_do(six_by_six
     from panel_deploy.bench.mujoco_peer import run_mujoco
 
     tolerance = six_by_six["true"][0].collision.tolerance
-    for on, (scene, model, ours) in six_by_six.items():
+    for on in ("true", "false"):
+        scene, model, ours = six_by_six[on]
         assert ('<pair geom1="r3c6" geom2="r4c2"' in export_mjcf(model)) == (on == "true")
         s = scene.simulation
         peer = run_mujoco(model, s.t_end, s.samples, 1e-5)

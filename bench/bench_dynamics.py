@@ -40,7 +40,7 @@ REFERENCE_RTOL = (1e-11, 1e-10, 1e-9)
 @njit(cache=True)
 def _loop(P, y, calls, jacobian):
     s = 0.0
-    near = kernels.near_pairs(P, P.contact)
+    near = kernels.near_pairs(P)
     for _ in range(calls):
         s += kernels.stiff_jacobian(P, y, near)[0][0, 0] if jacobian else kernels.rhs(P, y, near)[0]
     return s

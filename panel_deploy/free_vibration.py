@@ -101,7 +101,7 @@ def rig_of(model, source: str = "") -> Rig:
     free = P._replace(k=np.zeros_like(P.k), c=np.zeros_like(P.c))
 
     def force(P, theta, omega):
-        return float(mass_and_bias(P, np.array([theta]), np.array([omega]), near_pairs(P, P.contact))[1][0])
+        return float(mass_and_bias(P, np.array([theta]), np.array([omega]), near_pairs(P))[1][0])
 
     angles = (0.0, 0.5 * np.pi, np.pi)
     g = np.linalg.solve([[1.0, np.sin(a), np.cos(a)] for a in angles],
@@ -112,7 +112,7 @@ def rig_of(model, source: str = "") -> Rig:
         unit = pack(replace(model, air=AirParameters(model.air.density, 1.0)))
         unit = unit._replace(k=free.k, c=free.c)
         drag = force(unit, 1.0, 0.0) - force(unit, 1.0, 1.0)
-    inertia = float(mass_and_bias(P, np.array([1.0]), np.array([0.0]), near_pairs(P, P.contact))[0][0, 0])
+    inertia = float(mass_and_bias(P, np.array([1.0]), np.array([0.0]), near_pairs(P))[0][0, 0])
     return Rig(h.name, int(h.springs), inertia, tuple(float(x) for x in g), float(drag),
                float(model.air.drag_coefficient if model.air.density > 0 else 0.0),
                float(h.k), float(h.c))

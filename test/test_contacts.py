@@ -503,14 +503,14 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
     _, model, result = six_by_six["true"]
     P = pack(model)
     n = P.n
-    near = kernels.near_pairs(P, P.contact)
+    near = kernels.near_pairs(P)
     listed, spared = [], []
     for j in range(len(result.t)):
         y = np.concatenate([result.theta[j], result.omega[j], [0.0, 0.0]])
         for y in (y, y + 1e-6 * np.r_[y[n:2 * n], np.zeros(n + 2)]):
             R, p, *_ = kernels.kinematics(P, y[:n], y[n:2 * n])
             box = kernels._boxes(P, R, p)
-            rows = kernels._near_rows(P, P.contact, box, R, p, near)
+            rows = kernels._near_rows(P, box, R, p, near)
             a, b = P.contact[rows, 0].astype(int), P.contact[rows, 1].astype(int)
             spared.append(np.count_nonzero(near[6][a] + near[6][b] < near[7][rows]))
             assert np.array_equal(kernels.rhs(P, y, near), kernels.rhs(P, y, new_list(P)))
@@ -518,8 +518,8 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
                                  kernels.stiff_terms(P, y, new_list(P))[1:]):
                 assert np.array_equal(got, want)
         records = {key: np.zeros(9) for key in ("near", "all")}
-        kernels.contact_onsets(P, P.contact, y, result.t[j], records["near"], near)
-        kernels.contact_onsets(P, P.contact, y, result.t[j], records["all"], new_list(P))
+        kernels.contact_onsets(P, y, result.t[j], records["near"], near)
+        kernels.contact_onsets(P, y, result.t[j], records["all"], new_list(P))
         assert np.array_equal(records["near"], records["all"])
         overlapping = {r for r in range(len(P.contact)) if not kernels._pair_apart(P.contact, r, box)}
         assert overlapping <= set(rows.tolist())

@@ -65,4 +65,4 @@ def ring_2x2(closure="penalty", k_M=1e6, c_M=280.0, baumgarte=1e-3, k_h=(0.1, 0.
 def near(P):
     """A new candidate list of the panel contact pairs of ``P`` (kernels.near_pairs),
     what a run passes the kernels."""
-    return near_pairs(P, P.contact)
+    return near_pairs(P)

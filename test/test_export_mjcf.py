@@ -185,7 +185,7 @@ def test_open_tree_accelerations_match_the_kernel(make):
         d.qpos[idx] = theta
         d.qvel[idx] = omega
         mujoco.mj_forward(m, d)
-        ours = rhs(P, np.concatenate([theta, omega, [0.0, 0.0]]), near_pairs(P, P.contact))[n:2 * n]
+        ours = rhs(P, np.concatenate([theta, omega, [0.0, 0.0]]), near_pairs(P))[n:2 * n]
         assert np.all(np.isfinite(ours))
         np.testing.assert_allclose(d.qacc[idx], ours, rtol=1e-9, atol=1e-9 * np.abs(ours).max())
 
@@ -287,6 +287,6 @@ def test_air_maps_to_the_inertia_box_fluid_model():
         assert d.qfrc_fluid[0] == pytest.approx(box, rel=1e-9)
         P = pack(model)
         ours = kernels.mass_and_bias(P, np.array([theta]), np.array([omega]),
-                                     kernels.near_pairs(P, P.contact))[1][0]
+                                     kernels.near_pairs(P))[1][0]
         assert ours == pytest.approx(-rho * cd * B * A**4 * omega * abs(omega) / 8, rel=1e-12)
         assert d.qfrc_fluid[0] / ours == pytest.approx(5 / 8, rel=1e-4)

@@ -234,7 +234,7 @@ def record_onsets(P, y, t, t_eval, j, onsets, near):
     list ``near``)."""
     k = j - 1 if t <= t_eval[j - 1] else j
     if k < t_eval.shape[0]:
-        kernels.contact_onsets(P, P.contact, y, t, onsets[k], near)
+        kernels.contact_onsets(P, y, t, onsets[k], near)
 
 
 def _compiled_loop(scheme):
@@ -306,7 +306,7 @@ def _compiled_loop(scheme):
         landed = counts[5] != 0
         rejected = counts[6] != 0  # the last attempt was rejected by the error test
         expo = -1.0 / (rosenbrock.ERROR_ORDER if implicit else 5)
-        near = kernels.near_pairs(P, P.contact)
+        near = kernels.near_pairs(P)
         if nfev == 0:
             f = kernels.rhs(P, y, near)
             nfev = 1
@@ -434,7 +434,7 @@ STIFF_STEP = 2e-4
 def stiffness(P, y) -> float:
     """Spectral radius (1/s) of the stiff part of the Jacobian at state y."""
     n = P.n
-    A, B, ok = kernels.stiff_jacobian(P, y, kernels.near_pairs(P, P.contact))
+    A, B, ok = kernels.stiff_jacobian(P, y, kernels.near_pairs(P))
     if not (ok and np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
         return math.inf
     J = np.block([[np.zeros((n, n)), np.eye(n)], [A, B]])
@@ -521,7 +521,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
     cls = getattr(scipy.integrate, name)
     n, N = P.n, len(y0)
     counts = {"nfev": 0, "njev": 0}
-    near = kernels.near_pairs(P, P.contact)
+    near = kernels.near_pairs(P)
 
     def fun(t, y):
         counts["nfev"] += 1
@@ -653,7 +653,7 @@ def integrate_blocks(P, y0, t_eval, settings, max_steps, gap_limit, stops=None):
                          f"got {settings.method!r}")
     stops = (len(t_eval) - 1,) if stops is None else stops
     try:
-        finite = bool(np.all(np.isfinite(kernels.rhs(P, y0, kernels.near_pairs(P, P.contact)))))
+        finite = bool(np.all(np.isfinite(kernels.rhs(P, y0, kernels.near_pairs(P)))))
     except ZeroDivisionError:
         finite = False
     if not finite:

@@ -812,12 +812,12 @@ def body_drag(air, R, i, v, w):
 
 
 @njit(cache=True)
-def air_drag(P, air, R, p, w, vo, f):
+def air_drag(P, R, p, w, vo, f):
     """Subtract the air drag wrench of every body from its row of f (n + 1, 6),
-    the bias wrenches about the ground origin; returns the power dissipated, W.
-
-    ``air`` is ``P.air`` (no rows without air).
+    the bias wrenches about the ground origin; returns the power dissipated, W
+    (0 where ``P.air`` has no rows: no air).
     """
+    air = P.air
     if air.shape[0] == 0:
         return 0.0
     power = 0.0
@@ -898,8 +898,8 @@ NEAR_MARGIN = 0.005
 
 
 @njit(cache=True)
-def near_pairs(P, contact):
-    """An empty candidate list of the pairs of ``contact`` (``P.contact``) for
+def near_pairs(P):
+    """An empty candidate list of the pairs of ``P.contact`` for
     :func:`rhs`, a tuple:
 
     0. the :func:`_boxes` it was built at (n + 1, 2, 3), NaN until its first use;
@@ -913,7 +913,7 @@ def near_pairs(P, contact):
     Mutable scratch of one run, never shared between runs: it only spares
     :func:`panel_contacts` the tests of pairs that cannot touch, so a run
     gives the same result to the bit with it as without."""
-    q = contact.shape[0]
+    q = P.contact.shape[0]
     return (np.full((P.n + 1, 2, 3), np.nan), np.empty(q, np.int64), np.zeros(1, np.int64),
             np.zeros(q, np.int64), np.empty((P.n + 1, 3, 3)), np.empty((P.n + 1, 3)),
             np.empty(P.n + 1), np.full(q, -np.inf))
@@ -927,14 +927,15 @@ SLACK_ROUNDING = 1e-9
 
 
 @njit(cache=True)
-def _near_rows(P, contact, box, R, p, near):
-    """The rows of ``contact`` whose :func:`_boxes` ``box`` may overlap, from
+def _near_rows(P, box, R, p, near):
+    """The rows of ``P.contact`` whose :func:`_boxes` ``box`` may overlap, from
     the candidate list ``near`` (:func:`near_pairs`), rebuilt first if a box
     corner moved more than NEAR_MARGIN / 2 since it was built, and each
     body's motion since then at poses (R, p). A pair left out was
     NEAR_MARGIN apart along some axis then, and each of its boxes has moved
     at most half of that since: it is apart now, as :func:`_pair_apart`
     (``>=``) would find it."""
+    contact = P.contact
     built, rows, count, R0, p0, moved, slack = near[0], near[1], near[2], near[4], near[5], near[6], near[7]
     half = 0.5 * NEAR_MARGIN
     stale = False
@@ -966,8 +967,8 @@ def _near_rows(P, contact, box, R, p, near):
 
 
 @njit(cache=True)
-def _touching(P, contact, R, p, near):
-    """The rows of ``contact`` (``P.contact``) whose pairs may touch at poses
+def _touching(P, R, p, near):
+    """The rows of ``P.contact`` whose pairs may touch at poses
     (R, p): every other pair is apart, and :func:`_pair_points` would find
     no point of it.
 
@@ -979,8 +980,9 @@ def _touching(P, contact, R, p, near):
     sets the slack. One loop here, not a call a pair: passing the list to a
     function costs ~60 ns a call in reference counts, more than the test.
     """
+    contact = P.contact
     box = _boxes(P, R, p)
-    rows = _near_rows(P, contact, box, R, p, near)
+    rows = _near_rows(P, box, R, p, near)
     axes, moved, slack = near[3], near[6], near[7]
     out = np.empty(rows.shape[0], np.int64)
     m = 0
@@ -1002,18 +1004,19 @@ def _touching(P, contact, R, p, near):
 
 
 @njit(cache=True)
-def _pair_points(P, contact, r, R, p, work):
+def _pair_points(P, r, R, p, work):
     """Contact points of pair r of ``P.contact`` (:func:`boxes.contact`): their
     number and the normal from the pair's first body towards its second;
     points, depths and weights are left in work; callers first skip the
     pairs :func:`_touching` rules out."""
+    contact = P.contact
     a, b = int(contact[r, 0]), int(contact[r, 1])
     return contact_of_boxes(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], work,
                             contact[r, 12] != 0.0)
 
 
 @njit(cache=True)
-def panel_contacts(P, contact, R, p, w, vo, f, near):
+def panel_contacts(P, R, p, w, vo, f, near):
     """Subtract the panel-contact wrenches from f (n + 1, 6), the bias wrenches
     about the ground origin; returns the contact energy (J) and the power its
     dampers dissipate (W).
@@ -1029,17 +1032,18 @@ def panel_contacts(P, contact, R, p, w, vo, f, near):
     >= 0, is dissipated (s is d's rate up to the motion of the point).
     With a friction coefficient mu (``contact[r, 10]``) > 0, the point's
     :func:`_friction` opposes the slip, and dissipates all its work.
-    ``contact`` is ``P.contact`` (no rows without panel contact);
-    ``near`` the run's candidate list (:func:`near_pairs`).
+    0, 0 where ``P.contact`` has no rows (no panel contact);
+    ``near`` is the run's candidate list (:func:`near_pairs`).
     """
+    contact = P.contact
     if contact.shape[0] == 0:
         return 0.0, 0.0
     energy = 0.0
     power = 0.0
     work = box_scratch()
     points, depths, weights = work[-3], work[-2], work[-1]
-    for r in _touching(P, contact, R, p, near):
-        count, normal = _pair_points(P, contact, r, R, p, work)
+    for r in _touching(P, R, p, near):
+        count, normal = _pair_points(P, r, R, p, work)
         a, b = int(contact[r, 0]), int(contact[r, 1])
         mu, v_f = contact[r, 10], contact[r, 11]
         for q in range(count):
@@ -1077,7 +1081,7 @@ def _friction(slip, limit, v_f):
 
 
 @njit(cache=True)
-def contact_onsets(P, contact, y, t, record, near):
+def contact_onsets(P, y, t, record, near):
     """The fastest arriving panel contact at y: over the contact points shallower
     than CONTACT_RAMP (where the contact's force is not yet in full), the
     largest approach speed, into ``record`` (9,), laid out as
@@ -1094,14 +1098,15 @@ def contact_onsets(P, contact, y, t, record, near):
     one point pressing a step before its four), and a pair resting in light contact can
     still be struck. ``near``: the run's candidate list (:func:`near_pairs`).
     """
+    contact = P.contact
     if contact.shape[0] == 0:
         return
     n = P.n
     R, p, w, vo, _ = kinematics(P, y[:n], y[n:2 * n])
     work = box_scratch()
     points, depths = work[-3], work[-2]
-    for r in _touching(P, contact, R, p, near):
-        count, normal = _pair_points(P, contact, r, R, p, work)
+    for r in _touching(P, R, p, near):
+        count, normal = _pair_points(P, r, R, p, work)
         a, b = int(contact[r, 0]), int(contact[r, 1])
         for q in range(count):
             if depths[q] >= CONTACT_RAMP:
@@ -1158,8 +1163,8 @@ def _bias(P, theta, omega, kin, Jb, hb, near):
             gravity_energy -= _dot(fg, _sub(pi, _get(P.r0, i)))
         _put(f, i, _add(_get(f, i), fw))
         _put(f, i, _add(_get(f, i, 3), fv), 3)
-    dissipation += air_drag(P, P.air, R, p, w, vo, f)
-    e, pw = panel_contacts(P, P.contact, R, p, w, vo, f, near)
+    dissipation += air_drag(P, R, p, w, vo, f)
+    e, pw = panel_contacts(P, R, p, w, vo, f, near)
     spring += e
     dissipation += pw
     Q = np.empty(n)
@@ -1275,7 +1280,7 @@ def observe(P, y):
     theta = y[:n]
     omega = y[n:2 * n]
     M, Q, kin, acc, spring, dissipation, gravity_energy = mass_and_bias(
-        P, theta, omega, near_pairs(P, P.contact))
+        P, theta, omega, near_pairs(P))
     kinetic = 0.5 * _dot(omega, _mv(M, omega))
     R, p, w, vo, S = kin
     gap = 0.0
@@ -1318,19 +1323,19 @@ def _outer_add(out, scale, u):
 
 
 @njit(cache=True)
-def _pressed_points(P, contact, R, p, near):
+def _pressed_points(P, R, p, near):
     """The panel contact points pressed (depth > 0) at poses (R, p): (count,
     rows), row i < count ``[pair, normal (3), point (3, m), depth (m), weight]``,
     so that the separating axes run once a call, not once to count and again
     to fill. ``near``: the run's candidate list (:func:`near_pairs`)."""
     rows = np.empty((64, 9))
     count = 0
-    if contact.shape[0] == 0:
+    if P.contact.shape[0] == 0:
         return count, rows
     work = box_scratch()
     points, depths, weights = work[-3], work[-2], work[-1]
-    for r in _touching(P, contact, R, p, near):
-        found, normal = _pair_points(P, contact, r, R, p, work)
+    for r in _touching(P, R, p, near):
+        found, normal = _pair_points(P, r, R, p, work)
         if count + found > rows.shape[0]:
             grown = np.empty((2 * rows.shape[0] + found, 9))
             grown[:count] = rows[:count]
@@ -1345,9 +1350,10 @@ def _pressed_points(P, contact, R, p, near):
 
 
 @njit(cache=True)
-def _contact_row_count(contact, pressed):
+def _contact_row_count(P, pressed):
     """Rows of U that :func:`_contact_rows` writes: one per pressed point, two
     more where its pair has friction."""
+    contact = P.contact
     if contact.shape[0] == 0:
         return 0
     count, rows = pressed
@@ -1359,13 +1365,14 @@ def _contact_row_count(contact, pressed):
 
 
 @njit(cache=True)
-def _contact_rows(P, contact, pressed, S, U, kk, cc, start):
+def _contact_rows(P, pressed, S, U, kk, cc, start):
     """Write from row ``start`` of U, kk, cc the pressed panel contact points
     (:func:`_pressed_points`' (count, rows)): G, the row of -d(depth)/d theta,
     and the stiffness and damping of :func:`_contact_law` at its depth, so that K
     gains ``k G^T G`` (C likewise); then, for a point with friction, its two
     slip directions with :func:`_friction`'s damping at zero slip, mu times
     the spring's push over the friction speed."""
+    contact = P.contact
     if contact.shape[0] == 0:
         return
     count, rows = pressed
@@ -1434,12 +1441,12 @@ def stiff_terms(P, y, near):
         Cd[i] = P.c[i] + P.c_s * share
     m = P.cut_a.shape[0]
     closure = 6 * m if P.method == PENALTY else m
-    pressed = _pressed_points(P, P.contact, R, p, near)
-    rows = closure + _contact_row_count(P.contact, pressed)
+    pressed = _pressed_points(P, R, p, near)
+    rows = closure + _contact_row_count(P, pressed)
     U = np.zeros((rows, n))
     kk = np.empty(rows)
     cc = np.empty(rows)
-    _contact_rows(P, P.contact, pressed, S, U, kk, cc, closure)
+    _contact_rows(P, pressed, S, U, kk, cc, closure)
     Jw = np.empty((3, n))
     for j in range(m):
         th, g = _cut_angle(P, j, R)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from panel_deploy.boxes import FACE_POINTS, contact, scratch
+from panel_deploy.boxes import FACE_POINTS, FEATURE, contact, corners, least_overlap, scratch
 from panel_deploy.build import build_model
 from panel_deploy.collision import check_trajectory
 from panel_deploy.collision.geometry import box_signed_distance
@@ -289,6 +289,83 @@ def test_a_panel_resting_on_another_presses_in_as_the_law_says():
     assert phi * levers.min() > ramp  # every corner past the ramp: the closed form holds
     assert result.theta[-1, 0] == pytest.approx(phi, rel=1e-4)
     assert abs(result.omega[-1, 0]) < 1e-6
+
+
+def pressure_sweep(poses, m):
+    """Normal, push (sum of weight x depth, m) and its moment about a's centre
+    (m^2) of :func:`pressed_of` a (at the origin) against b at each of m poses
+    ``poses(s) -> (Rb, cb)``, s from 0 to 1; and b's least-overlap axis at
+    each pose (:func:`least_overlap`)."""
+    normals, pushes, moments, axes = [], [], [], []
+    for s in np.linspace(0.0, 1.0, m):
+        Rb, cb = poses(s)
+        n, points, depths, weights = pressed_of(np.eye(3), (0, 0, 0), HALF, Rb, cb, HALF)
+        normals.append(n)
+        pushes.append((weights * depths).sum())
+        moments.append(np.cross(points, n).T @ (weights * depths))
+        axes.append(least_overlap(np.eye(3), np.zeros(3), HALF, Rb, cb, HALF)[1])
+    return np.array(normals), np.array(pushes), np.array(moments), np.array(axes)
+
+
+def largest_steps(poses, m):
+    """The largest change between neighbouring poses of :func:`pressure_sweep`'s
+    normal, push and moment."""
+    normals, pushes, moments, _ = pressure_sweep(poses, m)
+    return (np.abs(np.diff(normals, axis=0)).max(), np.abs(np.diff(pushes)).max(),
+            np.abs(np.diff(moments, axis=0)).max())
+
+
+def test_the_pressure_keeps_its_direction_where_the_least_overlap_axis_passes_to_the_other_face():
+    """b tilted 1 mrad about x, pressed 20 um into a, slid along y through the
+    place where its own face normal, not a's, becomes the axis of least
+    overlap (10 x 10, 0.03-0.06 s: the push turned by the tilt at once there,
+    and the steps fell to 1e-6 s). The normal is the two faces' bisector on
+    both sides, and the normal, push and moment change less between
+    neighbouring poses as they come closer."""
+    tilt = 1e-3
+    Rb = Rotation.from_rotvec([tilt, 0, 0]).as_matrix()
+
+    def poses(s):
+        return Rb, np.array([0.0, -2e-5 + 4e-5 * s, 2 * HALF[2] - 2e-5])
+
+    normals, _, _, axes = pressure_sweep(poses, 41)
+    assert np.abs(axes[0] - axes[-1]).max() > 0.5 * tilt  # the sweep crosses the switch
+    bisector = np.array([0.0, -math.sin(tilt / 2), math.cos(tilt / 2)])
+    np.testing.assert_allclose(normals, np.tile(bisector, (len(normals), 1)), atol=1e-12)
+    coarse, fine = largest_steps(poses, 41), largest_steps(poses, 401)
+    assert all(f < 0.2 * c + 1e-15 for c, f in zip(coarse, fine)), (coarse, fine)
+
+
+@pytest.mark.parametrize("axis, lever, features", [
+    ((1.0, -1.0, 0.0), math.hypot(HALF[0], HALF[1]), {4, 3}),
+    ((0.0, 1.0, 0.0), HALF[0], {4, 2}),
+], ids=["corner-leaves", "edge-remains"])
+def test_the_pressure_is_continuous_where_a_tilted_face_leaves_the_feature_band(axis, lever, features):
+    """b tilted about a's diagonal or about y, pressed at its lowest corner or
+    edge: within the sweep its far corner, or its far edge, leaves the
+    FEATURE band (the face's feature goes from 4 corners to 3, or to the 2 of
+    an edge). The whole face presses on either side, so the push and its
+    moment change less between neighbouring tilts as they come closer (the
+    feature's triangle had pressed with twice the push, the edge at its
+    corners with k_p / 4 each)."""
+    axis = np.array(axis) / np.linalg.norm(axis)
+    eps = FEATURE * HALF[2]
+    band = eps / (2 * lever)  # the tilt at which the far corner or edge leaves the band
+
+    def poses(s):
+        Rb = Rotation.from_rotvec(axis * band * (0.9 + 0.2 * s)).as_matrix()
+        lowest = (corners(Rb, np.zeros(3), HALF)[:, 2]).min()
+        return Rb, np.array([0.0, 0.0, HALF[2] - lowest - 3e-5])
+
+    found = set()  # b's corners within the band of its lowest along the least-overlap axis
+    for s in (0.0, 1.0):
+        Rb, cb = poses(s)
+        _, n, _ = least_overlap(np.eye(3), np.zeros(3), HALF, Rb, cb, HALF)
+        low = corners(Rb, cb, HALF) @ np.array(n) * np.sign(n[2])
+        found.add(int(np.sum(low <= low.min() + eps)))
+    assert found == features, found
+    coarse, fine = largest_steps(poses, 41), largest_steps(poses, 401)
+    assert all(f < 0.2 * c + 1e-15 for c, f in zip(coarse, fine)), (coarse, fine)
 
 
 def test_a_panel_resting_on_another_presses_in_by_the_pressure_the_law_says():

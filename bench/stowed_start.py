@@ -4,7 +4,9 @@
                                  [--out bench/results/stowed_start.txt]
 
 The first packing circuit of each R x R array, as ``bench_scaling.py`` runs it
-(exact closure, ramped stops, panel contact, the scene's tolerances), over its
+(exact closure, ramped stops, panel contact, the scene's tolerances), with
+springs at the overlap's corners and with a pressure over it
+(``contact.pressure``), over its
 first ``--start`` seconds and over the whole window (0.2 s): wall time (median
 of ``--repeats``), accepted steps, right-hand-side evaluations and, for the
 DOPRI5 loop, the attempts its error test rejected ((evaluations - 1) / 6 less
@@ -45,20 +47,23 @@ def main(argv=None):
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "stowed_start.txt")
     args = ap.parse_args(argv)
     lines = [f"stowed_start: first packing circuits, exact closure, stops ramped over {STOP_RAMP} rad, "
-             f"the scene's tolerances; medians of {args.repeats} runs, 2 shared cores",
+             f"the scene's tolerances, the panel contacts' two laws (contact.pressure false and true); "
+             f"medians of {args.repeats} runs, 2 shared cores",
              "",
-             f"{'scene':<20} {'window':>7} {'wall s':>7} {'steps':>6} {'evals':>6} {'rejected':>8} "
+             f"{'scene':<20} {'law':<9} {'window':>7} {'wall s':>7} {'steps':>6} {'evals':>6} {'rejected':>8} "
              f"{'us/eval':>7} {'share':>6}"]
     print("\n".join(lines), flush=True)
-    for size in args.sizes:
+    for size, pressure in ((size, pressure) for size in args.sizes for pressure in (False, True)):
         scene, label = scene_of(size, size, WINDOW, "exact", STOP_RAMP)
+        scene = replace(scene, contact=replace(scene.contact, pressure=pressure))
+        law = "pressure" if pressure else "corners"
         model = build_model(scene)
         simulate(model, replace(scene.simulation, t_end=1e-5, samples=2))  # loads the kernels
         start_settings = replace(scene.simulation, t_end=args.start, samples=2)
         whole = timed(lambda: simulate(model, scene.simulation), args.repeats)
         start = timed(lambda: simulate(model, start_settings), args.repeats)
         for window, (wall, result) in ((args.start, start), (WINDOW, whole)):
-            line = (f"{label:<20} {window:>7g} {wall:>7.3f} {result.nsteps:>6} {result.nfev:>6} "
+            line = (f"{label:<20} {law:<9} {window:>7g} {wall:>7.3f} {result.nsteps:>6} {result.nfev:>6} "
                     f"{rejected(result):>8} {1e6 * wall / result.nfev:>7.0f} {wall / whole[0]:>6.0%}")
             lines.append(line)
             print(line, flush=True)

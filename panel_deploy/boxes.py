@@ -428,7 +428,7 @@ def _face_pressure(Va, Ra, Vb, Rb, n, work):
     push turned by 4-25 mrad at once) or to an edge product that equals
     them, nor where a tilted face's corners leave the FEATURE band (a face of
     3 corners in place of 4 pressed with twice the push; an edge pushed at
-    its corners, 20-40x the pressure's push there). Returns (count, normal) as
+    its corners, about 20x the pressure's push there). Returns (count, normal) as
     :func:`contact`; count -1 when a face is seen edge on. The faces' corners
     replace Va and Vb (8, 3); the FEATURE band's features in work stay."""
     _, _, _, _, A, B, angle, _, poly, spare, points, depths, weights = work

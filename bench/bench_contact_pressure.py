@@ -33,9 +33,15 @@ CASES = ((6, 6), (8, 8), (10, 10))
 LAWS = ("corners", "pressure")
 
 
+def with_law(scene, law):
+    """``scene`` with the panel contacts' law ``law``, one of LAWS
+    (``contact.pressure`` false or true)."""
+    return replace(scene, contact=replace(scene.contact, pressure=law == "pressure"))
+
+
 def measure(rows, cols, t_end, closure, repeats):
     scene, label = scene_of(rows, cols, t_end, closure, STOP_RAMP)
-    scenes = {law: replace(scene, contact=replace(scene.contact, pressure=law == "pressure")) for law in LAWS}
+    scenes = {law: with_law(scene, law) for law in LAWS}
     models = {law: build_model(s) for law, s in scenes.items()}
     runs = {law: [] for law in LAWS}
     for _ in range(repeats):

@@ -23,6 +23,7 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
+from bench_contact_pressure import LAWS, with_law
 from bench_fold import timed
 from bench_scaling import ROOT, STOP_RAMP, scene_of
 from panel_deploy.build import build_model
@@ -53,10 +54,9 @@ def main(argv=None):
              f"{'scene':<20} {'law':<9} {'window':>7} {'wall s':>7} {'steps':>6} {'evals':>6} {'rejected':>8} "
              f"{'us/eval':>7} {'share':>6}"]
     print("\n".join(lines), flush=True)
-    for size, pressure in ((size, pressure) for size in args.sizes for pressure in (False, True)):
+    for size, law in ((size, law) for size in args.sizes for law in LAWS):
         scene, label = scene_of(size, size, WINDOW, "exact", STOP_RAMP)
-        scene = replace(scene, contact=replace(scene.contact, pressure=pressure))
-        law = "pressure" if pressure else "corners"
+        scene = with_law(scene, law)
         model = build_model(scene)
         simulate(model, replace(scene.simulation, t_end=1e-5, samples=2))  # loads the kernels
         start_settings = replace(scene.simulation, t_end=args.start, samples=2)

@@ -97,6 +97,29 @@ def test_factor_solve_and_product_are_the_dense_ones(model):
         assert np.abs(out - M @ tau).max() < 1e-12 * np.abs(M).max() * np.abs(tau).max()
 
 
+def test_the_up_pass_gives_the_quadratic_forms_of_the_inverse(model):
+    """a . H^-1 b is the sum of the innovations' products over D, from the
+    pass up alone (what the exact closure's J M^-1 J^T is taken from), and
+    the pass down after it is solve_rows."""
+    P = pack(model)
+    n = P.n
+    rng = np.random.default_rng(4)
+    y = next(states(model, 1))
+    M, _, (R, p, _, _, S), *_ = kernels.mass_and_bias(P, y[:n], y[n:2 * n], near(P))
+    U, D, ok = articulated.factor(P, S, articulated.inertias(P, *kernels.body_inertias(P, R, p)), np.zeros(n))
+    assert ok
+    T = rng.normal(size=(4, n))
+    E = np.empty_like(T)
+    work = np.empty((len(T), n + 1, 6))
+    articulated.up_rows(P, S, U, D, T, E, work)
+    ref = T @ np.linalg.solve(M, T.T)
+    assert np.abs((E / D) @ E.T - ref).max() < 1e-10 * np.abs(ref).max()
+    articulated.down_rows(P, S, U, D, E, work)
+    X = np.empty_like(T)
+    articulated.solve_rows(P, S, U, D, T, X, work)
+    assert np.array_equal(E, X)
+
+
 @pytest.mark.parametrize("rows_per_coordinate", [0.2, 2.0])
 def test_w_solve_is_the_dense_solve(model, rows_per_coordinate):
     """``M W v = g`` by Woodbury on the articulated factor (few rows) and by the

@@ -108,12 +108,25 @@ def solve(P, S, U, D, tau, out, work):
 def solve_rows(P, S, U, D, T, out, work):
     """Write ``(H^-1 T^T)^T`` to out (m, n): :func:`solve` of each row of T
     (m, n) in one pass over the tree, each row's arithmetic as solve's
-    (the exact closure's m constraint rows: half the time of m passes).
+    (the W-solve's contact rows, :mod:`.rosenbrock`: half the time of m passes).
     work is (m, n + 1, 6) scratch; T is not changed and may not be out."""
+    up_rows(P, S, U, D, T, out, work)
+    down_rows(P, S, U, D, out, work)
+
+
+@njit(cache=True)
+def up_rows(P, S, U, D, T, out, work):
+    """The pass up the tree of :func:`solve_rows`: write to out (m, n) the
+    innovations ``e = L^-1 t`` of each row t of T (m, n), where ``H = L
+    diag(D) L^T`` is the factorisation the articulated-body recursion makes
+    (Rodriguez, Jain & Kreutz-Delgado's innovations factorisation). So
+    ``a . H^-1 b = sum_i e_a[i] e_b[i] / D[i]`` for any two rows a, b: the
+    quadratic forms of H^-1 need no pass down. work is (m, n + 1, 6)
+    scratch; T is not changed and may not be out."""
     n = P.n
     m = T.shape[0]
     work[:] = 0.0
-    # up the tree: the articulated bias forces, out holds u_i meanwhile
+    # out holds u_i, work the articulated bias forces passed to the parent
     for i in range(n - 1, -1, -1):
         a = P.parent[i]
         for r in range(m):
@@ -125,7 +138,16 @@ def solve_rows(P, S, U, D, T, out, work):
                 c = u / D[i]
                 for k in range(6):
                     work[r, a, k] += work[r, i, k] + U[i, k] * c
-    # down the tree: joint and body accelerations (the ground's row n stays 0)
+
+
+@njit(cache=True)
+def down_rows(P, S, U, D, out, work):
+    """The pass down the tree of :func:`solve_rows`: overwrite the innovations
+    in out (m, n) (:func:`up_rows`) with ``H^-1 t`` of their rows t.
+    work is (m, n + 1, 6) scratch."""
+    n = P.n
+    m = out.shape[0]
+    # joint and body accelerations (the ground's row n stays 0)
     work[:] = 0.0
     for i in range(n):
         a = P.parent[i]

@@ -589,31 +589,60 @@ def _constraint_factor(L, J, regularisation):
 
 
 @njit(cache=True)
-def _articulated_solve(P, S, UA, D, Q, J, qdd, regularisation):
-    """Write the tree's ``M^-1 Q`` to qdd (n,) and return :func:`_constraint_factor`'s
-    (Y, LA, ok) for the constraint rows J (mc, n), with M factored by the
-    articulated-body algorithm (:func:`articulated.factor`'s (UA, D)): Q and
-    the rows of J solved in one O(n) pass (:func:`articulated.solve_rows`,
-    which takes half the time of 1 + mc passes), no n x n matrix."""
+def _articulated_closure(P, S, UA, D, Q, c, J, gamma, omega, qdd):
+    """Write to qdd (n,) the exact closure's joint accelerations
+    (:func:`_exact_closure`'s) with M factored by the articulated-body
+    algorithm (:func:`articulated.factor`'s (UA, D)), no n x n matrix:
+    Q and the rows of J (mc, n) go up the tree in one pass
+    (:func:`articulated.up_rows`); J M^-1 J^T and J M^-1 Q are sums over
+    their innovations, and only ``Q + J^T lam`` goes back down, in place of
+    1 + mc rows. Returns (the constraint forces' power (W), ok); ok is False
+    where the regularised J M^-1 J^T is not positive definite."""
     n, mc = P.n, J.shape[0]
     rows = np.empty((1 + mc, n))
     rows[0] = Q
     rows[1:] = J
-    out = np.empty((1 + mc, n))
-    articulated.solve_rows(P, S, UA, D, rows, out, np.empty((1 + mc, n + 1, 6)))
-    qdd[:] = out[0]
-    Y = out[1:].T.copy()
-    LA, ok = _closure_gram(J, Y, regularisation)
-    return Y, LA, ok
+    E = np.empty((1 + mc, n))
+    work = np.empty((1 + mc, n + 1, 6))
+    articulated.up_rows(P, S, UA, D, rows, E, work)
+    A = np.zeros((mc, mc))
+    b = np.zeros(mc)
+    for i in range(n):
+        inv = 1.0 / D[i]
+        for r in range(mc):
+            er = E[1 + r, i] * inv
+            b[r] += er * E[0, i]
+            for s in range(r + 1):
+                A[r, s] += er * E[1 + s, i]
+    for r in range(mc):
+        for s in range(r):
+            A[s, r] = A[r, s]
+    LA, ok = _regularised_cholesky(A, P.regularisation)
+    if not ok:
+        return 0.0, False
+    lam, cdot = _multipliers(P, c, J, gamma, omega, b, LA)
+    e = E[:1]
+    for r in range(mc):
+        for i in range(n):
+            e[0, i] += lam[r] * E[1 + r, i]
+    articulated.down_rows(P, S, UA, D, e, work[:1])
+    qdd[:] = e[0]
+    return _dot(lam, cdot), True
 
 
 @njit(cache=True, inline='always')
 def _closure_gram(J, Y, regularisation):
-    """Cholesky factor of J Y + a Tikhonov term, relative to its largest
-    diagonal entry, which keeps it defined through rank loss of the closure
-    Jacobian (the stowed and flat-aligned singular states): ``(LA, ok)``."""
-    mc = J.shape[0]
-    A = _matmul(J, Y)
+    """:func:`_regularised_cholesky` of J Y: ``(LA, ok)``."""
+    return _regularised_cholesky(_matmul(J, Y), regularisation)
+
+
+@njit(cache=True, inline='always')
+def _regularised_cholesky(A, regularisation):
+    """Cholesky factor of A = J M^-1 J^T (mc, mc, overwritten) + a Tikhonov
+    term, relative to its largest diagonal entry, which keeps it defined
+    through rank loss of the closure Jacobian (the stowed and flat-aligned
+    singular states): ``(LA, ok)``."""
+    mc = A.shape[0]
     scale = 0.0
     for r in range(mc):
         scale = max(scale, A[r, r])
@@ -623,21 +652,28 @@ def _closure_gram(J, Y, regularisation):
 
 
 @njit(cache=True, inline='always')
-def _exact_closure(P, c, J, gamma, Y, LA, omega, qdd):
-    """Add to the tree's qdd (n,) the exact closure's Lagrange multiplier term
-    (Baumgarte-stabilised, time constant ``P.baumgarte``), from
-    :func:`closure_jacobian`'s (c, J, gamma) and :func:`_constraint_factor`'s
-    (Y, LA) however M was factored. Returns the constraint forces' power, W."""
-    n = P.n
+def _multipliers(P, c, J, gamma, omega, Jqdd, LA):
+    """The exact closure's Lagrange multipliers (Baumgarte-stabilised, time
+    constant ``P.baumgarte``) from :func:`closure_jacobian`'s (c, J, gamma),
+    J times the tree's qdd, ``Jqdd`` (mc,), and the factor LA of the
+    regularised J M^-1 J^T: ``(lam, J omega)``."""
     T = P.baumgarte
     cdot = _mv(J, omega)
     lam = np.empty(J.shape[0])
     for r in range(J.shape[0]):
-        s = 0.0
-        for k in range(n):
-            s += J[r, k] * qdd[k]
-        lam[r] = (-gamma[r] - (2.0 / T) * cdot[r] - c[r] / (T * T)) - s
+        lam[r] = (-gamma[r] - (2.0 / T) * cdot[r] - c[r] / (T * T)) - Jqdd[r]
     _cholesky_solve(LA, lam.reshape((lam.shape[0], 1)))
+    return lam, cdot
+
+
+@njit(cache=True, inline='always')
+def _exact_closure(P, c, J, gamma, Y, LA, omega, qdd):
+    """Add to the tree's qdd (n,) the exact closure's Lagrange multiplier term
+    (:func:`_multipliers`) from :func:`closure_jacobian`'s (c, J, gamma) and
+    :func:`_constraint_factor`'s (Y, LA) of the dense M. Returns the
+    constraint forces' power, W."""
+    n = P.n
+    lam, cdot = _multipliers(P, c, J, gamma, omega, _mv(J, qdd), LA)
     for i in range(n):
         s = 0.0
         for r in range(J.shape[0]):
@@ -1230,11 +1266,10 @@ def rhs(P, y, near):
             articulated.solve(P, S, U, D, Q, qdd, np.empty((n + 1, 6)))
         else:
             c, J, gamma = closure_jacobian(P, R, p, kin[2], kin[3], S, acc)
-            Y, LA, ok = _articulated_solve(P, S, U, D, Q, J, qdd, P.regularisation)
+            dy[2 * n + 1], ok = _articulated_closure(P, S, U, D, Q, c, J, gamma, omega, qdd)
             if not ok:
                 dy[:] = np.nan
                 return dy
-            dy[2 * n + 1] = _exact_closure(P, c, J, gamma, Y, LA, omega, qdd)
         return dy
     M, qdd, kin, acc, _, dissipation, _ = mass_and_bias(P, theta, omega, near)
     dy[2 * n] = dissipation

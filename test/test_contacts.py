@@ -606,6 +606,32 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
     assert np.median(spared[1::2]) > 0.5 * np.median(listed), (spared[1::2], listed)
 
 
+def test_the_right_hand_side_leaves_the_onsets_of_its_own_state(six_by_six):
+    """The step loops take an accepted step's contact onsets from its last
+    right-hand side (kernels.take_onsets): after rhs at a sample's state they
+    are the ones contact_onsets finds there with a new candidate list, and
+    after rhs at the same pose at rest (every approach speed 0) there are
+    none, whatever the evaluation before met."""
+    _, model, result = six_by_six["true"]
+    P = pack(model)
+    n = P.n
+    near = kernels.near_pairs(P)
+    met = 0
+    for j in range(len(result.t)):
+        y = np.concatenate([result.theta[j], result.omega[j], [0.0, 0.0]])
+        kernels.rhs(P, y, near)
+        got, want = np.zeros(9), np.zeros(9)
+        kernels.take_onsets(near, result.t[j], got)
+        kernels.contact_onsets(P, y, result.t[j], want, new_list(P))
+        assert np.array_equal(got, want)
+        met += want[1] > 0.0
+        kernels.rhs(P, np.concatenate([result.theta[j], np.zeros(n + 2)]), near)
+        rest = np.zeros(9)
+        kernels.take_onsets(near, result.t[j], rest)
+        assert np.array_equal(rest, np.zeros(9))
+    assert met >= 3, met
+
+
 def deepest_interference(model, theta) -> float:
     """Largest interference (m) of any unhinged pair over the samples theta."""
     worst = 0.0

@@ -227,14 +227,19 @@ ROS34PW2_TERMS = 2
 
 
 @njit(cache=True)
-def record_onsets(P, y, t, t_eval, j, onsets, near):
+def record_onsets(P, y, t, t_eval, j, onsets, near, evaluated=False):
     """The contact onsets of the accepted step that ended at (t, y) into the
     row of the sample interval (t_{k-1}, t_k] that holds t, given j, the next
-    sample to fill (:func:`kernels.contact_onsets`, with the run's candidate
-    list ``near``)."""
+    sample to fill, with the run's candidate list ``near``: those its last
+    right-hand side met if ``evaluated`` (it was at y:
+    :func:`kernels.take_onsets`), else found at y
+    (:func:`kernels.contact_onsets`)."""
     k = j - 1 if t <= t_eval[j - 1] else j
     if k < t_eval.shape[0]:
-        kernels.contact_onsets(P, y, t, onsets[k], near)
+        if evaluated:
+            kernels.take_onsets(near, t, onsets[k])
+        else:
+            kernels.contact_onsets(P, y, t, onsets[k], near)
 
 
 def _compiled_loop(scheme):
@@ -379,7 +384,8 @@ def _compiled_loop(scheme):
                     if lands:
                         Y[j] = y
                         j += 1
-                record_onsets(P, y, t, t_eval, j, onsets, near)
+                # the step's last right-hand side was at its end: DOPRI5's K[6], f
+                record_onsets(P, y, t, t_eval, j, onsets, near, True)
                 nsteps += 1
                 if gap_limit > 0.0 and max_gap(P, y) > gap_limit:
                     status, code = -1, 3

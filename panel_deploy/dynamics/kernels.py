@@ -944,15 +944,20 @@ def near_pairs(P):
     4. the bodies' rotations (n + 1, 3, 3) and 5. centres (n + 1, 3), m, when
        it was built, and 6. how far any point of each body has moved since (n + 1,), m;
     7. each pair's slack (q,), m: how much further its two bodies may move
-       together (by 6.) and stay apart, as the last test of the pair found it.
+       together (by 6.) and stay apart, as the last test of the pair found it;
+    8. the fastest contact onset the last :func:`panel_contacts` call met
+       (9,), laid out as ``result.ONSET_COLUMNS``, its time NaN (the call
+       does not know it) and its speed 0 for none: the step loops take the
+       onsets of an accepted step from its last evaluation
+       (:func:`take_onsets`), which was at the step's end.
 
-    Mutable scratch of one run, never shared between runs: it only spares
+    Mutable scratch of one run, never shared between runs: 0.-7. only spare
     :func:`panel_contacts` the tests of pairs that cannot touch, so a run
     gives the same result to the bit with it as without."""
     q = P.contact.shape[0]
     return (np.full((P.n + 1, 2, 3), np.nan), np.empty(q, np.int64), np.zeros(1, np.int64),
             np.zeros(q, np.int64), np.empty((P.n + 1, 3, 3)), np.empty((P.n + 1, 3)),
-            np.empty(P.n + 1), np.full(q, -np.inf))
+            np.empty(P.n + 1), np.full(q, -np.inf), np.zeros(9))
 
 
 #: Rounding allowance of a pair's slack (:func:`near_pairs`), m: a pair skipped
@@ -1069,7 +1074,20 @@ def panel_contacts(P, R, p, w, vo, f, near):
     With a friction coefficient mu (``contact[r, 10]``) > 0, the point's
     :func:`_friction` opposes the slip, and dissipates all its work.
     0, 0 where ``P.contact`` has no rows (no panel contact);
-    ``near`` is the run's candidate list (:func:`near_pairs`).
+    ``near`` is the run's candidate list (:func:`near_pairs`), which also
+    gets the fastest onset met (its item 8).
+
+    An onset is a contact point shallower than CONTACT_RAMP (where the
+    force is not yet in full), its speed the approach speed there: a
+    contact stops an impact within a step or two, so the speed of its
+    shallow points at the steps' ends is the impact's (the samples would
+    miss it: the contact absorbed a 4.2 m/s impact between two samples,
+    issue 33). Every shallow point, not a pair's first: a face coming down
+    may touch first at one slow point, its fast corners a step later (the
+    paper scene's r1c2+r1c3 on r2c4, 50 us samples: one point at 0.000 m/s,
+    the next sample another at 0.097 m/s; r4c1 on r4c4 was missed so, one
+    point pressing a step before its four), and a pair resting in light
+    contact can still be struck.
     """
     contact = P.contact
     if contact.shape[0] == 0:
@@ -1078,6 +1096,8 @@ def panel_contacts(P, R, p, w, vo, f, near):
     power = 0.0
     work = box_scratch()
     points, depths, weights = work[-3], work[-2], work[-1]
+    onset = near[8]
+    onset[0], onset[1] = np.nan, 0.0
     for r in _touching(P, R, p, near):
         count, normal = _pair_points(P, r, R, p, work)
         a, b = int(contact[r, 0]), int(contact[r, 1])
@@ -1087,6 +1107,10 @@ def panel_contacts(P, R, p, w, vo, f, near):
             x = (points[q, 0], points[q, 1], points[q, 2])
             relative = _sub(_point_velocity(w, vo, a, x), _point_velocity(w, vo, b, x))
             speed = _dot(normal, relative)
+            if depth < CONTACT_RAMP and speed > onset[1]:
+                onset[1], onset[2] = speed, r
+                onset[3], onset[4], onset[5] = x
+                onset[6], onset[7], onset[8] = normal
             push, spring, e, _, _ = _contact_law(depth, speed, weights[q] * contact[r, 8],
                                                  weights[q] * contact[r, 9])
             energy += e
@@ -1117,42 +1141,29 @@ def _friction(slip, limit, v_f):
 
 
 @njit(cache=True)
-def contact_onsets(P, y, t, record, near):
-    """The fastest arriving panel contact at y: over the contact points shallower
-    than CONTACT_RAMP (where the contact's force is not yet in full), the
-    largest approach speed, into ``record`` (9,), laid out as
-    ``result.ONSET_COLUMNS``, at time t (s), if faster than the one already
-    there (record[1]; 0 for none).
+def take_onsets(near, t, record):
+    """Into ``record`` (9,), laid out as ``result.ONSET_COLUMNS``, the fastest
+    contact onset of the last :func:`panel_contacts` call with the candidate
+    list ``near`` (:func:`near_pairs`), at time t (s), if faster than the one
+    already there (record[1]; 0 for none)."""
+    onset = near[8]
+    if onset[1] > record[1]:
+        record[:] = onset
+        record[0] = t
 
-    Called once per accepted step: a contact stops an impact within a step or
-    two, so the speed of its shallow points at those steps is the impact's;
-    the samples would miss it (issue 33: the contact absorbed a 4.2 m/s impact
-    between two samples). Every shallow point, not a pair's first: a face
-    coming down may touch first at one slow point, its fast corners a step
-    later (the paper scene's r1c2+r1c3 on r2c4, 50 us samples: one point at
-    0.000 m/s, the next sample another at 0.097 m/s; r4c1 on r4c4 was missed so,
-    one point pressing a step before its four), and a pair resting in light contact can
-    still be struck. ``near``: the run's candidate list (:func:`near_pairs`).
-    """
-    contact = P.contact
-    if contact.shape[0] == 0:
+
+@njit(cache=True)
+def contact_onsets(P, y, t, record, near):
+    """The fastest arriving panel contact at y (:func:`panel_contacts`' onsets)
+    into ``record`` (9,) at time t (s), as :func:`take_onsets`, for a caller
+    whose last evaluation was not at y (scipy's integrators).
+    ``near``: the run's candidate list (:func:`near_pairs`)."""
+    if P.contact.shape[0] == 0:
         return
     n = P.n
     R, p, w, vo, _ = kinematics(P, y[:n], y[n:2 * n])
-    work = box_scratch()
-    points, depths = work[-3], work[-2]
-    for r in _touching(P, R, p, near):
-        count, normal = _pair_points(P, r, R, p, work)
-        a, b = int(contact[r, 0]), int(contact[r, 1])
-        for q in range(count):
-            if depths[q] >= CONTACT_RAMP:
-                continue
-            x = (points[q, 0], points[q, 1], points[q, 2])
-            speed = _dot(normal, _sub(_point_velocity(w, vo, a, x), _point_velocity(w, vo, b, x)))
-            if speed > record[1]:
-                record[0], record[1], record[2] = t, speed, r
-                record[3], record[4], record[5] = x
-                record[6], record[7], record[8] = normal
+    panel_contacts(P, R, p, w, vo, np.zeros((n + 1, 6)), near)
+    take_onsets(near, t, record)
 
 
 @njit(cache=True, inline='always')

@@ -581,10 +581,10 @@ def _cholesky_solve(L, X):
 @njit(cache=True)
 def _constraint_factor(L, J, regularisation):
     """Y = M^-1 J^T and the Cholesky factor of the regularised J M^-1 J^T
-    (:func:`_closure_gram`); ``L`` is the Cholesky factor of M. Returns ``(Y, LA, ok)``."""
+    (:func:`_regularised_cholesky`); ``L`` is the Cholesky factor of M. Returns ``(Y, LA, ok)``."""
     Y = J.T.copy()
     _cholesky_solve(L, Y)
-    LA, ok = _closure_gram(J, Y, regularisation)
+    LA, ok = _regularised_cholesky(_matmul(J, Y), regularisation)
     return Y, LA, ok
 
 
@@ -621,19 +621,12 @@ def _articulated_closure(P, S, UA, D, Q, c, J, gamma, omega, qdd):
     if not ok:
         return 0.0, False
     lam, cdot = _multipliers(P, c, J, gamma, omega, b, LA)
-    e = E[:1]
+    qdd[:] = E[0]
     for r in range(mc):
         for i in range(n):
-            e[0, i] += lam[r] * E[1 + r, i]
-    articulated.down_rows(P, S, UA, D, e, work[:1])
-    qdd[:] = e[0]
+            qdd[i] += lam[r] * E[1 + r, i]
+    articulated.down_rows(P, S, UA, D, qdd.reshape((1, n)), work[:1])
     return _dot(lam, cdot), True
-
-
-@njit(cache=True, inline='always')
-def _closure_gram(J, Y, regularisation):
-    """:func:`_regularised_cholesky` of J Y: ``(LA, ok)``."""
-    return _regularised_cholesky(_matmul(J, Y), regularisation)
 
 
 @njit(cache=True, inline='always')

@@ -60,7 +60,7 @@ LOCATORS = ",".join([*(f"panel_deploy._kernel_locator.{name}" for name in
 #: them, relative to the package: the sources of :func:`kernel_sources_stamp`
 #: (test_startup checks that every file with a kernel is here).
 KERNEL_SOURCES = ("boxes.py", "collision/geometry.py", "collision/monitor.py", "collision/motion.py",
-                  "collision/refine.py", "dynamics/articulated.py", "dynamics/integrate.py",
+                  "collision/refine.py", "dynamics/_jit.py", "dynamics/articulated.py", "dynamics/integrate.py",
                   "dynamics/kernels.py", "dynamics/pack.py", "dynamics/rosenbrock.py")
 
 NOTICE = "panel-deploy: compiling kernels for this machine, first run only (a few minutes)"

@@ -140,7 +140,12 @@ def test_docs_state_every_unit_and_column_name_as_the_code_does():
 
 
 def test_a_version_2_file_loads_with_its_columns_mapped_from_its_scene(tmp_path):
-    """The stored format-2 run re-simulated by this version: the same motion by hinge name."""
+    """The stored format-2 run re-simulated by this version: the same motion by hinge name.
+
+    To 1e-5 rad: the re-run differs from the stored one by rounding, amplified
+    within the run's atol of 1e-6 (5.7e-7 rad since the kernels fuse multiply-adds,
+    ``dynamics._jit``), while a column taken from another hinge differs by 1.75e-4
+    rad or more."""
     z = _numpy_only(V2)
     assert int(z["format_version"]) == 2 and "joint_names" not in z
     old = load_trajectory(V2)
@@ -152,7 +157,7 @@ def test_a_version_2_file_loads_with_its_columns_mapped_from_its_scene(tmp_path)
     new = _numpy_only(npz)
     for i, name in enumerate(names):
         column = [str(x) for x in new["joint_names"]].index(name)
-        assert np.allclose(old.result.theta[:, i], new["theta"][:, column], rtol=0, atol=1e-9), name
+        assert np.allclose(old.result.theta[:, i], new["theta"][:, column], rtol=0, atol=1e-5), name
     assert np.array_equal(old.stiffness, new["stiffness"])
     assert np.allclose(old.damping, new["damping"], rtol=1e-12)  # c followed k in version 2
 

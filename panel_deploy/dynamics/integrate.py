@@ -34,6 +34,7 @@ from numba import njit
 
 from ..errors import ModelError
 from . import articulated, kernels, rosenbrock
+from ._jit import FLOAT_MATH
 from .result import Status, no_onsets
 
 #: scipy's implicit solvers: they get the analytic Jacobian.
@@ -85,7 +86,7 @@ class Integration:
 PACE_FACTOR, PACE_MIN_STEPS = 100.0, 1000
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _off_pace(t0, t, t_end, nsteps, max_steps) -> bool:
     """Whether the pace of ``nsteps`` steps from t0 to t, at a check point,
     projects past PACE_FACTOR budgets by t_end."""
@@ -96,7 +97,7 @@ def _off_pace(t0, t, t_end, nsteps, max_steps) -> bool:
 
 # --- switch location (shared by both integrators) ---
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _modes(theta):
     out = np.empty(theta.shape[0], dtype=np.int64)
     for i in range(theta.shape[0]):
@@ -104,12 +105,12 @@ def _modes(theta):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _boundary(m_old, m_new):
     return 0.0 if min(m_old, m_new) == 0 else math.pi
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _hermite(th0, w0, th1, w1, h, s):
     """Cubic Hermite interpolant of theta at fraction s of a step of length h."""
     s2 = s * s
@@ -125,7 +126,7 @@ def locates(P, settings) -> bool:
     return bool(settings.events) and P.stop_ramp == 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def first_switch(n, y0, y1, h, tol):
     """Fraction of the step (0..1) at which the first tree hinge changes contact
     mode, by bisection on the cubic Hermite interpolant of theta; 2.0 if none.
@@ -157,7 +158,7 @@ def first_switch(n, y0, y1, h, tol):
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def max_gap(P, y):
     """Largest loop-closure gap at state y, m."""
     n = P.n
@@ -180,7 +181,7 @@ _B = np.array([35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84])
 _E = np.array([71 / 57600, 0.0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40])
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _rms_norm(e, y0, y1, rtol, atol):
     s = 0.0
     for i in range(e.shape[0]):
@@ -189,7 +190,7 @@ def _rms_norm(e, y0, y1, rtol, atol):
     return math.sqrt(s / e.shape[0])
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _dopri5_step(P, y, f, h, K, near=None):
     """One Dormand-Prince step of length h; returns (y1, err) and leaves rhs(y1) in K[6]
     (``near``: the run's candidate list, :func:`kernels.near_pairs`)."""
@@ -226,7 +227,7 @@ SCHEMES = {"dopri5": DOPRI5, "ros34pw2": ROS34PW2}
 ROS34PW2_TERMS = 2
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def record_onsets(P, y, t, t_eval, j, onsets, near, evaluated=False):
     """The contact onsets of the accepted step that ended at (t, y) into the
     row of the sample interval (t_{k-1}, t_k] that holds t, given j, the next
@@ -292,7 +293,7 @@ def _compiled_loop(scheme):
     structured = scheme == ROS34PW2_TERMS
     implicit = scheme == ROS34PW2 or structured
 
-    @njit(cache=True)
+    @njit(cache=True, **FLOAT_MATH)
     def loop(P, t_eval, Y, onsets, j, j_stop, carry, counts, rtol, atol, max_step,
              locate, max_steps, gap_limit):
         N = Y.shape[1]

@@ -52,6 +52,7 @@ from ..boxes import plane_axes
 from ..boxes import scratch as box_scratch
 from ..boxes import separating_axis
 from . import articulated
+from ._jit import FLOAT_MATH
 from .pack import EXACT, PENALTY, TREE
 
 # Every kernel module imports this one (collision's through dynamics), so the
@@ -63,7 +64,7 @@ PI = math.pi
 ZERO3 = (0.0, 0.0, 0.0)
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def hinge_law(theta, omega, k, c, k_s, c_s, ramp):
     """Torque (N m), stored energy (J) and damper power (W) of one hinge, Eq. (2)-(4),
     the stop's spring and damper coming in over the first ``ramp`` rad past a
@@ -87,7 +88,7 @@ def hinge_law(theta, omega, k, c, k_s, c_s, ramp):
     return tau, energy, power
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def stop_engagement(depth, ramp):
     """The share (0..1) of k_s and c_s acting at ``depth`` rad past a limit:
     ``3 x^2 - 2 x^3`` of ``x = depth / ramp`` within the ramp, 1 beyond it.
@@ -107,7 +108,7 @@ def stop_engagement(depth, ramp):
     return x * x * (3.0 - 2.0 * x)
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def contact_mode(theta):
     """0 below the flat limit, 1 within [0, pi], 2 past the folded limit."""
     return 0 if theta < 0.0 else (2 if theta > PI else 1)
@@ -117,7 +118,7 @@ def contact_mode(theta):
 # 3-vectors travel as tuples, which numba keeps in registers: an array
 # temporary costs a heap allocation, which dominated the kernels' run time.
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _dot(a, b):
     """a . b for 1-d arrays or tuples of equal length."""
     s = 0.0
@@ -126,7 +127,7 @@ def _dot(a, b):
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _mv(A, x):
     """A @ x for small arrays without a BLAS call (whose overhead dominates here)."""
     out = np.zeros(A.shape[0])
@@ -138,7 +139,7 @@ def _mv(A, x):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _matmul(A, B):
     """A @ B for small arrays, each entry summed in index order."""
     out = np.zeros((A.shape[0], B.shape[1]))
@@ -150,13 +151,13 @@ def _matmul(A, B):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _get(A, i, o=0):
     """``A[i, o:o + 3]`` as a tuple."""
     return (A[i, o], A[i, o + 1], A[i, o + 2])
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _put(A, i, v, o=0):
     """``A[i, o:o + 3] = v``."""
     A[i, o] = v[0]
@@ -164,27 +165,27 @@ def _put(A, i, v, o=0):
     A[i, o + 2] = v[2]
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _add(a, b):
     return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _sub(a, b):
     return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _scale(a, s):
     return (a[0] * s, a[1] * s, a[2] * s)
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _cross(a, b):
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _rotate(R, b, x):
     """``R[b] @ x`` for orientations R (k, 3, 3) and a 3-vector x."""
     return (R[b, 0, 0] * x[0] + R[b, 0, 1] * x[1] + R[b, 0, 2] * x[2],
@@ -192,7 +193,7 @@ def _rotate(R, b, x):
             R[b, 2, 0] * x[0] + R[b, 2, 1] * x[1] + R[b, 2, 2] * x[2])
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _rotation(axis, angle):
     """Rows of the rotation by ``angle`` (rad) about the unit ``axis`` (Rodrigues)."""
     x, y, z = axis[0], axis[1], axis[2]
@@ -203,19 +204,19 @@ def _rotation(axis, angle):
             (z * x * C - y * s, z * y * C + x * s, c + z * z * C))
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _carried(P, R, p, b, x):
     """Current position (m) of body b's material point that sits at x in the flat state."""
     return _add(_get(p, b), _rotate(R, b, _sub(x, _get(P.r0, b))))
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _point_velocity(w, vo, b, x):
     """Velocity (m/s) of body b's material point at x."""
     return _add(_get(vo, b), _cross(_get(w, b), x))
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def kinematics(P, theta, omega):
     """Poses, velocities and joint screws of every body.
 
@@ -255,7 +256,7 @@ def kinematics(P, theta, omega):
     return R, p, w, vo, S
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def body_states(P, theta, omega):
     """Pose and velocity of every body in model body order (``P.body``).
 
@@ -284,7 +285,7 @@ def body_states(P, theta, omega):
 # [-[h]x, m 1]] with J = R I R^T - m [c]x^2 and h = m c; a composite body is
 # the sum, so (J, h, m) describe both without 6 x 6 matrices.
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _angular_inertia(P, R, p, i, out):
     """Write J of body i (kg m^2, see above) to out[i] (k, 3, 3)."""
     m = P.mass[i]
@@ -301,7 +302,7 @@ def _angular_inertia(P, R, p, i, out):
             out[i, r, q] = (t0 * R[i, q, 0] + t1 * R[i, q, 1] + t2 * R[i, q, 2]) - m * cc
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _inertia_times(J, i, h, m, xw, xv):
     """Spatial inertia (J[i], h, m) times the spatial vector (xw, xv): (angular, linear)."""
     h0, h1, h2 = h[0], h[1], h[2]
@@ -314,14 +315,14 @@ def _inertia_times(J, i, h, m, xw, xv):
     return fw, fv
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _dot6(A, i, fw, fv):
     """``A[i, :6] . (fw, fv)``, summed in index order."""
     return (A[i, 0] * fw[0] + A[i, 1] * fw[1] + A[i, 2] * fw[2]
             + A[i, 3] * fv[0] + A[i, 4] * fv[1] + A[i, 5] * fv[2])
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _point_jacobian(P, S, b, x, out, row, sign):
     """Add ``sign`` times d(velocity of body b's material point at x)/d omega
     to out[row:row + 3] (k, n)."""
@@ -332,7 +333,7 @@ def _point_jacobian(P, S, b, x, out, row, sign):
         b = P.parent[b]
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _angular_jacobian(P, S, b, out, row, sign):
     """Add ``sign`` times d(angular velocity of body b)/d omega to out[row:row + 3] (k, n)."""
     while b < P.n:
@@ -341,7 +342,7 @@ def _angular_jacobian(P, S, b, out, row, sign):
         b = P.parent[b]
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _point_bias_acceleration(acc, w, vo, b, x):
     """Acceleration of body b's material point at x when qdd = 0 (velocity products only)."""
     wb = _get(w, b)
@@ -349,7 +350,7 @@ def _point_bias_acceleration(acc, w, vo, b, x):
                 _cross(wb, _add(_get(vo, b), _cross(wb, x))))
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _cut_angle(P, j, R):
     """Cut-hinge angle (rad, continuous on (-pi/2, 3pi/2]) and its exact rate axis g (3-tuple).
 
@@ -371,7 +372,7 @@ def _cut_angle(P, j, R):
     return theta, (g[0] / d, g[1] / d, g[2] / d)
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _cut_ends(P, j, R, p):
     """Ends (M_a, N_a, M_b, N_b) of cut hinge j as carried by its bodies a and b, m."""
     M = _get(P.cut_point, j)
@@ -381,7 +382,7 @@ def _cut_ends(P, j, R, p):
             _carried(P, R, p, b, M), _carried(P, R, p, b, N))
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def largest_gap(P, R, p):
     """Largest loop-closure gap |M_b - M_a| or |N_b - N_a| over the cut hinges, m."""
     out = 0.0
@@ -392,7 +393,7 @@ def largest_gap(P, R, p):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def loop_residual(P, theta):
     """How far tree angles ``theta`` (rad) are from closing every loop: per cut
     hinge j, row j holds M_b - M_a and N_b - N_a (m, the gaps of its two ends,
@@ -408,7 +409,7 @@ def loop_residual(P, theta):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _add_wrench(F, body, torque, force, point):
     """Add a force applied at ``point`` plus a torque to body's wrench about the origin."""
     t = _add(torque, _cross(point, force))
@@ -417,7 +418,7 @@ def _add_wrench(F, body, torque, force, point):
         F[body, 3 + k] += force[k]
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def cut_forces(P, R, p, w, vo):
     """Wrenches of the cut hinges on their bodies, with energy and damper power.
 
@@ -469,7 +470,7 @@ def cut_forces(P, R, p, w, vo):
     return F, energy, power
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def closure_jacobian(P, R, p, w, vo, S, acc):
     """Exact-closure constraints of Eq. (5) kept as equalities.
 
@@ -533,7 +534,7 @@ def closure_jacobian(P, R, p, w, vo, S, acc):
     return c, J, gamma
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _cholesky(A):
     n = A.shape[0]
     L = np.zeros_like(A)
@@ -552,7 +553,7 @@ def _cholesky(A):
     return L, True
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _cholesky_solve(L, X):
     """Overwrite X (n, k) with the solution of ``L L^T X = X``.
 
@@ -578,7 +579,7 @@ def _cholesky_solve(L, X):
             X[i, c] /= d
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _constraint_factor(L, J, regularisation):
     """Y = M^-1 J^T and the Cholesky factor of the regularised J M^-1 J^T
     (:func:`_regularised_cholesky`); ``L`` is the Cholesky factor of M. Returns ``(Y, LA, ok)``."""
@@ -588,7 +589,7 @@ def _constraint_factor(L, J, regularisation):
     return Y, LA, ok
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _articulated_closure(P, S, UA, D, Q, c, J, gamma, omega, qdd):
     """Write to qdd (n,) the exact closure's joint accelerations
     (:func:`_exact_closure`'s) with M factored by the articulated-body
@@ -629,7 +630,7 @@ def _articulated_closure(P, S, UA, D, Q, c, J, gamma, omega, qdd):
     return _dot(lam, cdot), True
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def _regularised_cholesky(A, regularisation):
     """Cholesky factor of A = J M^-1 J^T (mc, mc, overwritten) + a Tikhonov
     term, relative to its largest diagonal entry, which keeps it defined
@@ -644,7 +645,7 @@ def _regularised_cholesky(A, regularisation):
     return _cholesky(A)
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def _multipliers(P, c, J, gamma, omega, Jqdd, LA):
     """The exact closure's Lagrange multipliers (Baumgarte-stabilised, time
     constant ``P.baumgarte``) from :func:`closure_jacobian`'s (c, J, gamma),
@@ -659,7 +660,7 @@ def _multipliers(P, c, J, gamma, omega, Jqdd, LA):
     return lam, cdot
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def _exact_closure(P, c, J, gamma, Y, LA, omega, qdd):
     """Add to the tree's qdd (n,) the exact closure's Lagrange multiplier term
     (:func:`_multipliers`) from :func:`closure_jacobian`'s (c, J, gamma) and
@@ -675,7 +676,7 @@ def _exact_closure(P, c, J, gamma, Y, LA, omega, qdd):
     return _dot(lam, cdot)
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def body_inertias(P, R, p):
     """Angular inertias J (n, 3, 3, kg m^2, see above) and first moments h = m c
     (n, 3, kg m) of the bodies about the ground origin."""
@@ -688,7 +689,7 @@ def body_inertias(P, R, p):
     return Jb, hb
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def mass_matrix(P, S, Jb, hb):
     """The mass matrix (n, n) from :func:`body_inertias`' (J, h)."""
     n = P.n
@@ -736,7 +737,7 @@ def mass_matrix(P, S, Jb, hb):
 _W_VERTEX, _W_MID, _W_CENTRE = 1.0 / 20.0, 2.0 / 15.0, 9.0 / 20.0
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _u2_moments(v0, a, b, s, r):
     """u^2, s u^2 and r u^2 at the face point (s, r)."""
     u = v0 + a * s + b * r
@@ -744,7 +745,7 @@ def _u2_moments(v0, a, b, s, r):
     return (u2, s * u2, r * u2)
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _triangle_u2(v0, a, b, p, q, t):
     """Integrals of u^2, s u^2, r u^2 over the triangle p, q, t ((s, r) pairs, m)."""
     area = 0.5 * abs((q[0] - p[0]) * (t[1] - p[1]) - (t[0] - p[0]) * (q[1] - p[1]))
@@ -758,18 +759,18 @@ def _triangle_u2(v0, a, b, p, q, t):
                        _scale(centre, _W_CENTRE)), area)
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _u(v0, a, b, x):
     return v0 + a * x[0] + b * x[1]
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _towards(x, y, f):
     """The point a fraction f of the way from x to y."""
     return (x[0] + f * (y[0] - x[0]), x[1] + f * (y[1] - x[1]))
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _positive_part(v0, a, b, x, y, z):
     """Integrals of u^2, s u^2, r u^2 over the part of triangle x, y, z where u >= 0."""
     ux, uy, uz = _u(v0, a, b, x), _u(v0, a, b, y), _u(v0, a, b, z)
@@ -791,7 +792,7 @@ def _positive_part(v0, a, b, x, y, z):
     return corner if count == 1 else _sub(whole, corner)
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def face_drag(v0, a, b, half_length, half_width):
     """Integrals of |u| u, s |u| u and r |u| u over the face, u = v0 + a s + b r.
 
@@ -816,7 +817,7 @@ def face_drag(v0, a, b, half_length, half_width):
     return _sub(_scale(positive, 2.0), whole)
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def body_drag(air, R, i, v, w):
     """Air drag on body i with centroid velocity v (m/s) and angular velocity
     w (rad/s), ground frame: force (N), torque about the centroid (N m) and
@@ -840,7 +841,7 @@ def body_drag(air, R, i, v, w):
     return _scale(n, -q * I0), torque, q * (v0 * I0 + a * Is + b * Ir)
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def air_drag(P, R, p, w, vo, f):
     """Subtract the air drag wrench of every body from its row of f (n + 1, 6),
     the bias wrenches about the ground origin; returns the power dissipated, W
@@ -868,7 +869,7 @@ def air_drag(P, R, p, w, vo, f):
 CONTACT_RAMP = 1e-5
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _contact_law(depth, speed, k, c):
     """One contact point at depth > 0 (m) approaching at speed (m/s), see
     ``CONTACT_RAMP``: its push (N, never a pull), the spring's share of it
@@ -884,7 +885,7 @@ def _contact_law(depth, speed, k, c):
     return max(0.0, spring + damping * speed), spring, energy, stiffness, damping
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _boxes(P, R, p):
     """The axis-aligned box around every body at poses (R, p): (n + 1, 2, 3),
     its lower and upper corners (m), once per call for :func:`_pair_apart`."""
@@ -898,7 +899,7 @@ def _boxes(P, R, p):
     return out
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def _box_gap(contact, r, box):
     """The gap (m) between the :func:`_boxes` of pair r of ``P.contact``
     along the ground axis that parts them most (< 0: they overlap)."""
@@ -909,7 +910,7 @@ def _box_gap(contact, r, box):
     return gap
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def _pair_apart(contact, r, box, margin=0.0):
     """Whether the :func:`_boxes` of pair r of ``P.contact`` are apart by at
     least ``margin`` (m; boxes that only touch are apart, a contact needs
@@ -926,7 +927,7 @@ def _pair_apart(contact, r, box, margin=0.0):
 NEAR_MARGIN = 0.005
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def near_pairs(P):
     """An empty candidate list of the pairs of ``P.contact`` for
     :func:`rhs`, a tuple:
@@ -960,7 +961,7 @@ def near_pairs(P):
 SLACK_ROUNDING = 1e-9
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _near_rows(P, box, R, p, near):
     """The rows of ``P.contact`` whose :func:`_boxes` ``box`` may overlap, from
     the candidate list ``near`` (:func:`near_pairs`), rebuilt first if a box
@@ -1000,7 +1001,7 @@ def _near_rows(P, box, R, p, near):
     return rows[:count[0]]
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _touching(P, R, p, near):
     """The rows of ``P.contact`` whose pairs may touch at poses
     (R, p): every other pair is apart, and :func:`_pair_points` would find
@@ -1037,7 +1038,7 @@ def _touching(P, R, p, near):
     return out[:m]
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _pair_points(P, r, R, p, work):
     """Contact points of pair r of ``P.contact`` (:func:`boxes.contact`): their
     number and the normal from the pair's first body towards its second;
@@ -1049,7 +1050,7 @@ def _pair_points(P, r, R, p, work):
                             contact[r, 12] != 0.0)
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def panel_contacts(P, R, p, w, vo, f, near):
     """Subtract the panel-contact wrenches from f (n + 1, 6), the bias wrenches
     about the ground origin; returns the contact energy (J) and the power its
@@ -1118,7 +1119,7 @@ def panel_contacts(P, R, p, w, vo, f, near):
     return energy, power
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def _friction(slip, limit, v_f):
     """Regularised Coulomb friction at a contact point slipping at ``slip``
     (3-tuple, m/s: the first body's point relative to the second's, in the
@@ -1133,7 +1134,7 @@ def _friction(slip, limit, v_f):
     return _scale(slip, scale), scale * v2
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def take_onsets(near, t, record):
     """Into ``record`` (9,), laid out as ``result.ONSET_COLUMNS``, the fastest
     contact onset of the last :func:`panel_contacts` call with the candidate
@@ -1145,7 +1146,7 @@ def take_onsets(near, t, record):
         record[0] = t
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def contact_onsets(P, y, t, record, near):
     """The fastest arriving panel contact at y (:func:`panel_contacts`' onsets)
     into ``record`` (9,) at time t (s), as :func:`take_onsets`, for a caller
@@ -1159,7 +1160,7 @@ def contact_onsets(P, y, t, record, near):
     take_onsets(near, t, record)
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def _bias(P, theta, omega, kin, Jb, hb, near):
     """Generalised force minus bias by recursive Newton-Euler with zero joint
     acceleration, for the kinematics ``kin`` and :func:`body_inertias`' (J, h),
@@ -1220,7 +1221,7 @@ def _bias(P, theta, omega, kin, Jb, hb, near):
     return Q, acc, spring, dissipation, gravity_energy
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def mass_and_bias(P, theta, omega, near):
     """Mass matrix, generalised force and everything the energy needs, with
     the panel contacts' candidate list ``near`` (:func:`near_pairs`).
@@ -1241,7 +1242,7 @@ def mass_and_bias(P, theta, omega, near):
     return M, Q, kin, acc, spring, dissipation, gravity_energy
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def rhs(P, y, near):
     """dy/dt of the state vector (see the module docstring); NaN if M is not positive definite.
     ``near``: the run's candidate list of panel contact pairs (:func:`near_pairs`).
@@ -1294,7 +1295,7 @@ def rhs(P, y, near):
     return dy
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def rhs_jacobian(P, y, f0, near):
     """Forward-difference Jacobian d rhs / dy, (2n + 2, 2n + 2), given f0 = rhs(P, y, near)."""
     N = y.shape[0]
@@ -1308,7 +1309,7 @@ def rhs_jacobian(P, y, f0, near):
     return Jac
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def observe(P, y):
     """Energies and closure gap at one state.
 
@@ -1331,7 +1332,7 @@ def observe(P, y):
     return kinetic, spring, gravity_energy, gap, J
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def cut_angles(P, R):
     """Angle of every cut hinge (rad) for body orientations R (n + 1, 3, 3)."""
     m = P.cut_a.shape[0]
@@ -1341,7 +1342,7 @@ def cut_angles(P, R):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def cut_rates(P, R, w):
     """Rate of every cut hinge (rad/s) for body orientations R (n + 1, 3, 3) and
     angular velocities w (n + 1, 3), rad/s, both in kernel body order."""
@@ -1354,14 +1355,14 @@ def cut_rates(P, R, w):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _outer_add(out, scale, u):
     for i in range(u.shape[0]):
         for j in range(u.shape[0]):
             out[i, j] += scale * u[i] * u[j]
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _pressed_points(P, R, p, near):
     """The panel contact points pressed (depth > 0) at poses (R, p): (count,
     rows), row i < count ``[pair, normal (3), point (3, m), depth (m), weight]``,
@@ -1388,7 +1389,7 @@ def _pressed_points(P, R, p, near):
     return count, rows
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _contact_row_count(P, pressed):
     """Rows of U that :func:`_contact_rows` writes: one per pressed point, two
     more where its pair has friction."""
@@ -1403,7 +1404,7 @@ def _contact_row_count(P, pressed):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _contact_rows(P, pressed, S, U, kk, cc, start):
     """Write from row ``start`` of U, kk, cc the pressed panel contact points
     (:func:`_pressed_points`' (count, rows)): G, the row of -d(depth)/d theta,
@@ -1435,7 +1436,7 @@ def _contact_rows(P, pressed, S, U, kk, cc, start):
                 extra += 1
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def _direction_row(P, Jp, e, out):
     """Write ``e . Jp`` (n,) to out: the rate along the unit vector e
     (3-tuple) of the relative velocity (of a point, or angular) whose
@@ -1444,7 +1445,7 @@ def _direction_row(P, Jp, e, out):
         out[col] = e[0] * Jp[0, col] + e[1] * Jp[1, col] + e[2] * Jp[2, col]
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def _stop_share(P, theta):
     """:func:`stop_engagement` of a hinge at theta (0 within its limits)."""
     if contact_mode(theta) == 1:
@@ -1452,7 +1453,7 @@ def _stop_share(P, theta):
     return stop_engagement(theta - PI if theta > PI else -theta, P.stop_ramp)
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def stiff_terms(P, y, near):
     """The stiff springs and dampers in joint space, ``K = diag(Kd) + U^T
     diag(kk) U`` and ``C = diag(Cd) + U^T diag(cc) U`` (N m/rad, N m s/rad),
@@ -1506,7 +1507,7 @@ def stiff_terms(P, y, near):
     return kin, Kd, Cd, U, kk, cc
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def stiff_jacobian(P, y, near):
     """The stiff linear part of ``A = d qdd / d theta`` and ``B = d qdd / d omega``, (n, n).
 

@@ -43,6 +43,7 @@ import numpy as np
 from numba import njit
 
 from . import articulated, kernels
+from ._jit import FLOAT_MATH
 
 GAMMA = 4.3586652150845900e-01
 _ALPHA = np.array([
@@ -65,7 +66,7 @@ _B_HAT = np.array([3.7810903145819369e-01, -9.6042292212423178e-02, 5.0000000000
 ERROR_ORDER = 3
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def lu_factor(S):
     """In-place LU with partial pivoting of a small dense matrix; returns (LU, piv, ok).
 
@@ -97,7 +98,7 @@ def lu_factor(S):
     return S, piv, True
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def lu_solve(LU, piv, b, x):
     """Write to x (n,) the solution of ``S x = b`` from lu_factor's (LU, piv); b is not changed."""
     n = LU.shape[0]
@@ -112,7 +113,7 @@ def lu_solve(LU, piv, b, x):
         x[i] /= LU[i, i]
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _solve_w(n, hg, A, LU, piv, r, z, work):
     """Write to z the solution of ``(I - hg J) z = r`` for the block Jacobian of the
     module docstring; work is (n,) scratch."""
@@ -128,7 +129,7 @@ def _solve_w(n, hg, A, LU, piv, r, z, work):
         z[i] = r[i]
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _jac_times(n, A, B, u, out):
     """Write J u for the block Jacobian to out[:2 n] (its energy rows are zero)."""
     for i in range(n):
@@ -139,7 +140,7 @@ def _jac_times(n, A, B, u, out):
         out[n + i] = s
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def terms(P, y, near):
     """The stiff Jacobian at y for :func:`step_terms`: (S, I6, Jb, hb, Kd, Cd,
     U, kk, cc), the terms of :func:`kernels.stiff_terms` with the joint screws S,
@@ -158,7 +159,7 @@ def terms(P, y, near):
 DENSE_ROWS = 0.5
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _w_factor(P, hg, S, I6, Jb, hb, Kd, Cd, U, kk, cc):
     """Factor ``M W = H + U^T diag(wq) U`` with ``H = M + diag(hg Cd + hg^2 Kd)``
     and ``wq = hg cc + hg^2 kk``.
@@ -198,7 +199,7 @@ def _w_factor(P, hg, S, I6, Jb, hb, Kd, Cd, U, kk, cc):
     return UA, D, Z, wq, LU, piv, False, ok
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _w_dense(P, arm, S, Jb, hb, U, wq):
     """LU of ``M + diag(arm) + U^T diag(wq) U`` (n, n): (LU, piv, ok), M by
     composite bodies (:func:`kernels.mass_matrix`). A contact row is non-zero
@@ -222,7 +223,7 @@ def _w_dense(P, arm, S, Jb, hb, U, wq):
     return lu_factor(W)
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _w_solve(P, S, factor, U, g, v, work, proj, yq):
     """Write to v (n,) the solution of ``M W v = g`` from :func:`_w_factor`'s
     factor; work (n + 1, 6), proj and yq (r,) are scratch."""
@@ -243,7 +244,7 @@ def _w_solve(P, S, factor, U, g, v, work, proj, yq):
             v[i] -= c * Z[q, i]
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _add_stiff(Kd, U, kk, x, scale, out, proj):
     """out += scale (diag(Kd) + U^T diag(kk) U) x; proj is (r,) scratch."""
     for q in range(U.shape[0]):
@@ -258,7 +259,7 @@ def _add_stiff(Kd, U, kk, x, scale, out, proj):
             out[i] += proj[q] * U[q, i]
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _stage_state(y, K, st, out):
     """Write stage st's state ``y + sum_q alpha_{st q} K[q]`` to out (st > 0)."""
     for i in range(y.shape[0]):
@@ -269,7 +270,7 @@ def _stage_state(y, K, st, out):
         out[i] = s
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def _stage_argument(K, st, out):
     """Write stage st's Jacobian-product argument ``sum_q gamma_{st q} K[q]`` to out (st > 0)."""
     for i in range(out.shape[0]):
@@ -279,7 +280,7 @@ def _stage_argument(K, st, out):
         out[i] = s
 
 
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def _solution(y, K):
     """The order-3 solution and its difference to the embedded order-2 one."""
     N = y.shape[0]
@@ -296,7 +297,7 @@ def _solution(y, K):
     return y1, err
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def step(P, y, f, h, A, B, K, near):
     """One ROS34PW2 step of length h from y (f = rhs(P, y)) with Jacobian blocks A, B.
 
@@ -342,7 +343,7 @@ def step(P, y, f, h, A, B, K, near):
     return y1, err, True
 
 
-@njit(cache=True)
+@njit(cache=True, **FLOAT_MATH)
 def step_terms(P, y, f, h, jac, K, near):
     """:func:`step` with the stiff Jacobian as the terms of :func:`terms`, in O(n r).
 

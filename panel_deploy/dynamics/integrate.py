@@ -495,7 +495,7 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
                 j, status, code = loop(
                     P, t_eval, Y, onsets, j, int(stop), carry, counts, settings.rtol,
                     settings.atol, settings.max_step, locates(P, settings), max_steps, gap_limit)
-            except ZeroDivisionError:  # numba's float division by an underflowed zero
+            except ZeroDivisionError:  # 1/0 in boxes.py, on numba's error model (the dynamics: inf)
                 status, code = -1, -Status.NON_FINITE
         message = _FAILURES.get(code, "")
         status = Status(-min(code, 4) if status else 0)

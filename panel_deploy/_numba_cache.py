@@ -60,8 +60,10 @@ LOCATORS = ",".join([*(f"panel_deploy._kernel_locator.{name}" for name in
 #: them, relative to the package: the sources of :func:`kernel_sources_stamp`
 #: (test_startup checks that every file with a kernel is here).
 KERNEL_SOURCES = ("boxes.py", "collision/geometry.py", "collision/monitor.py", "collision/motion.py",
-                  "collision/refine.py", "dynamics/_jit.py", "dynamics/articulated.py", "dynamics/integrate.py",
-                  "dynamics/kernels.py", "dynamics/pack.py", "dynamics/rosenbrock.py")
+                  "collision/refine.py", "dynamics/_jit.py", "dynamics/air.py", "dynamics/articulated.py",
+                  "dynamics/closure.py", "dynamics/hinges.py", "dynamics/integrate.py", "dynamics/kernels.py",
+                  "dynamics/pack.py", "dynamics/panel_contact.py", "dynamics/rosenbrock.py",
+                  "dynamics/spatial.py", "dynamics/stiff.py")
 
 NOTICE = "panel-deploy: compiling kernels for this machine, first run only (a few minutes)"
 
@@ -124,7 +126,7 @@ def announce_compilation(stream=None) -> None:
     """Print :data:`NOTICE` once per process on stderr when numba starts compiling.
 
     A numba compile event fires only on a cache miss, so a warm run stays
-    silent. Called by the kernel modules at import (importing numba here
+    silent. Called by :mod:`panel_deploy.dynamics._jit` at import (importing numba here
     would cost every command its half-second import).
     """
     from numba.core import event

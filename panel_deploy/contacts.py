@@ -9,7 +9,7 @@ each other (on 6 x 6 and larger arrays every first packing circuit did,
 within 0.02-0.06 s). :func:`stowed_contacts` lists the pairs; their
 contact (compliant, normal, at the corners of the overlap of the two boxes'
 facing features, or with ``contact.pressure`` a pressure over it) is
-:func:`panel_deploy.dynamics.kernels.panel_contacts`.
+:func:`panel_deploy.dynamics.panel_contact.panel_contacts`.
 
 The rule that separates pressing from collision: a collision is
 interference deeper than ``collision.tolerance`` (0.1 mm by default, the

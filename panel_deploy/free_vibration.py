@@ -90,7 +90,8 @@ def rig_of(model, source: str = "") -> Rig:
     TrajectoryError
         The model is not two bodies joined by one hinge (``source`` names the recording).
     """
-    from .dynamics.kernels import mass_and_bias, near_pairs
+    from .dynamics.kernels import mass_and_bias
+    from .dynamics.panel_contact import near_pairs
     from .dynamics.pack import pack
 
     if len(model.hinges) != 1 or model.n_coords != 1:

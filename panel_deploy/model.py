@@ -185,7 +185,7 @@ class AirParameters:
     ``drag_coefficient`` C_d (dimensionless) of the pressure ``p = -1/2 rho
     C_d |v_n| v_n`` on every point of a panel's large face, v_n the point's
     velocity along the face normal (m/s); see
-    :func:`panel_deploy.dynamics.kernels.face_drag`.
+    :func:`panel_deploy.dynamics.air.face_drag`.
     """
 
     density: float = 0.0
@@ -256,10 +256,10 @@ class Model:
     mu_p, friction_speed : float
         Coulomb friction coefficient of a panel contact (0, default: none)
         and the slip speed (m/s) below which its friction is viscous
-        (:func:`~panel_deploy.dynamics.kernels.panel_contacts`).
+        (:func:`~panel_deploy.dynamics.panel_contact.panel_contacts`).
     stop_ramp : float
         Depth past a joint limit (rad) over which k_s and c_s come in
-        smoothly (:func:`~panel_deploy.dynamics.kernels.stop_engagement`);
+        smoothly (:func:`~panel_deploy.dynamics.hinges.stop_engagement`);
         0 (default): at once, the paper's Eq. (4).
     """
 

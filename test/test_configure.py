@@ -87,7 +87,7 @@ def test_stopped_deployment_keeps_its_samples_and_says_so(short):
 
 
 def test_hinge_states_cut_hinge_rate_is_the_angle_derivative(short):
-    from panel_deploy.dynamics import kernels
+    from panel_deploy.dynamics import closure
     from panel_deploy.dynamics.pack import pack
     from panel_deploy.kinematics import forward_kinematics
     scene, model = short
@@ -98,7 +98,7 @@ def test_hinge_states_cut_hinge_rate_is_the_angle_derivative(short):
     P = pack(model)
 
     def cut_angle(q):
-        return kernels.cut_angles(P, forward_kinematics(model, q)[0][P.body])[0]
+        return closure.cut_angles(P, forward_kinematics(model, q)[0][P.body])[0]
 
     eps = 1e-6
     for j in range(0, len(result.t), 10):

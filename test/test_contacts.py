@@ -15,7 +15,7 @@ from panel_deploy.build import build_model
 from panel_deploy.collision import check_trajectory
 from panel_deploy.collision.geometry import box_signed_distance
 from panel_deploy.contacts import stowed_contacts, with_panel_contacts
-from panel_deploy.dynamics import kernels, simulate
+from panel_deploy.dynamics import kernels, panel_contact, simulate, stiff
 from panel_deploy.dynamics.pack import pack
 from panel_deploy.export import export_mjcf
 from panel_deploy.kinematics import forward_kinematics
@@ -127,7 +127,7 @@ def test_a_pressure_over_the_overlap_is_continuous_as_corners_cross():
         else:
             _, _, _, depths = points_of(np.eye(3), (0, 0, 0), HALF, Rb, cb, HALF)
             weights = np.full(len(depths), 1 / FACE_POINTS)
-        return sum(kernels._contact_law(d, 0.0, w * k, 0.0)[0] for d, w in zip(depths, weights))
+        return sum(panel_contact.contact_law(d, 0.0, w * k, 0.0)[0] for d, w in zip(depths, weights))
 
     for pressure in (False, True):
         steps = [np.abs(np.diff([push(t, pressure) for t in np.linspace(-0.4, 0.4, m)])).max()
@@ -203,7 +203,7 @@ def test_panels_meeting_edge_on_push_continuously_as_they_turn():
     def push(turn, axis):
         R = Rotation.from_rotvec(np.multiply(axis, turn)).as_matrix() @ Rb
         count, _, _, depths = points_of(Ra, ca, HALF, R, cb, HALF)
-        return sum(kernels._contact_law(d, 0.0, k, 0.0)[0] for d in depths)
+        return sum(panel_contact.contact_law(d, 0.0, k, 0.0)[0] for d in depths)
 
     for axis in ([0, 1, 0], [1, 0, 0], [0, 0, 1]):
         steps = [np.abs(np.diff([push(t, axis) for t in np.linspace(-3e-3, 3e-3, m)])).max()
@@ -228,7 +228,7 @@ def test_near_coplanar_side_faces_press_once_whichever_face_the_axis_takes():
     for _ in range(40):
         Rb = (Rotation.from_rotvec(rng.standard_normal(3) * 1e-9) * rb).as_matrix()
         _, _, _, depths = points_of(Ra, ca, HALF, Rb, cb, HALF)
-        pushes.append(sum(kernels._contact_law(d, 0.0, 2.5e6, 0.0)[0] for d in depths))
+        pushes.append(sum(panel_contact.contact_law(d, 0.0, 2.5e6, 0.0)[0] for d in depths))
     assert min(pushes) > 0.0
     assert max(pushes) / min(pushes) < 1.001
 
@@ -282,7 +282,7 @@ def test_a_panel_resting_on_another_presses_in_as_the_law_says():
     settings = SimulationSection(t_end=0.4, samples=5, method="DOP853", rtol=1e-8, atol=1e-12)
     result = simulate(model, settings)
     assert result.success, result.message
-    ramp, k = kernels.CONTACT_RAMP, k_p / FACE_POINTS
+    ramp, k = panel_contact.CONTACT_RAMP, k_p / FACE_POINTS
     levers = np.array([lever - HALF[0], lever + HALF[0]])
     # 2 corners at each lever: sum 2 k (phi L - ramp / 2) L = m g lever
     phi = (m * g * lever / (2 * k) + ramp / 2 * levers.sum()) / (levers ** 2).sum()
@@ -380,7 +380,7 @@ def test_a_panel_resting_on_another_presses_in_by_the_pressure_the_law_says():
     settings = SimulationSection(t_end=0.4, samples=5, method="DOP853", rtol=1e-8, atol=1e-12)
     result = simulate(model, settings)
     assert result.success, result.message
-    ramp, a = kernels.CONTACT_RAMP, HALF[0]
+    ramp, a = panel_contact.CONTACT_RAMP, HALF[0]
     near, far = lever - a, lever + a
     phi = (2 * a * m * g * lever / k_p + ramp / 4 * (far ** 2 - near ** 2)) / ((far ** 3 - near ** 3) / 3)
     assert phi * near > ramp  # pressed past the ramp everywhere: the closed form holds
@@ -433,7 +433,7 @@ def turning_panel(mu, k_hinge, pressed=1e-4, lever=0.2, k_p=850.0):
     hinge = Hinge("h", 0, 1, np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.01, "top", k_hinge, 0.0, 0.0, ())
     model = with_panel_contacts(Model.build([g, b], [hinge], 0), k_p, 0.0, pairs=[(0, 1)], reach=None,
                                 mu_p=mu)
-    push = k_p / FACE_POINTS * (pressed - kernels.CONTACT_RAMP / 2)
+    push = k_p / FACE_POINTS * (pressed - panel_contact.CONTACT_RAMP / 2)
     corners = np.array([[lever + x, y] for x in (-HALF[0], HALF[0]) for y in (-HALF[1], HALF[1])])
     return model, push, np.hypot(*corners.T), box_inertia(m, size_b)[2, 2] + m * lever ** 2
 
@@ -488,7 +488,7 @@ def test_the_stiff_jacobian_holds_the_frictions_damping_at_zero_slip():
         delta = 1e-6  # rad/s: the corners slip at ~2.5e-7 m/s, far below v_f
         rate = [kernels.rhs(P, np.array([0.2, w, 0.0, 0.0]), new_list(P))[1] for w in (-delta, delta)]
         slope = (rate[1] - rate[0]) / (2 * delta)
-        A, B, ok = kernels.stiff_jacobian(P, np.array([0.2, 0.0, 0.0, 0.0]), new_list(P))
+        A, B, ok = stiff.stiff_jacobian(P, np.array([0.2, 0.0, 0.0, 0.0]), new_list(P))
         assert ok
         assert B[0, 0] == pytest.approx(slope, rel=1e-6)
         assert (slope < -1e3) == (mu > 0)
@@ -570,7 +570,7 @@ def test_the_fastest_press_is_the_fastest_onset_and_an_impact_from_the_impact_sp
 
 def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
     """rhs, the stiff terms and the contact onsets with one run's candidate
-    list of contact pairs (kernels.near_pairs), the separating axes and the
+    list of contact pairs (panel_contact.near_pairs), the separating axes and the
     slacks it remembers, kept across the samples of a 6 x 6 deployment and
     a state just after each (where the slacks spare most pairs their test),
     rebuilt as the panels move, equal those with a new list at each call
@@ -580,25 +580,25 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
     _, model, result = six_by_six["true"]
     P = pack(model)
     n = P.n
-    near = kernels.near_pairs(P)
+    near = panel_contact.near_pairs(P)
     listed, spared = [], []
     for j in range(len(result.t)):
         y = np.concatenate([result.theta[j], result.omega[j], [0.0, 0.0]])
         for y in (y, y + 1e-6 * np.r_[y[n:2 * n], np.zeros(n + 2)]):
             R, p, *_ = kernels.kinematics(P, y[:n], y[n:2 * n])
-            box = kernels._boxes(P, R, p)
-            rows = kernels._near_rows(P, box, R, p, near)
+            box = panel_contact._boxes(P, R, p)
+            rows = panel_contact._near_rows(P, box, R, p, near)
             a, b = P.contact[rows, 0].astype(int), P.contact[rows, 1].astype(int)
             spared.append(np.count_nonzero(near[6][a] + near[6][b] < near[7][rows]))
             assert np.array_equal(kernels.rhs(P, y, near), kernels.rhs(P, y, new_list(P)))
-            for got, want in zip(kernels.stiff_terms(P, y, near)[1:],
-                                 kernels.stiff_terms(P, y, new_list(P))[1:]):
+            for got, want in zip(stiff.stiff_terms(P, y, near)[1:],
+                                 stiff.stiff_terms(P, y, new_list(P))[1:]):
                 assert np.array_equal(got, want)
         records = {key: np.zeros(9) for key in ("near", "all")}
         kernels.contact_onsets(P, y, result.t[j], records["near"], near)
         kernels.contact_onsets(P, y, result.t[j], records["all"], new_list(P))
         assert np.array_equal(records["near"], records["all"])
-        overlapping = {r for r in range(len(P.contact)) if not kernels._pair_apart(P.contact, r, box)}
+        overlapping = {r for r in range(len(P.contact)) if not panel_contact._pair_apart(P.contact, r, box)}
         assert overlapping <= set(rows.tolist())
         listed.append(len(rows))
     assert max(listed) < len(P.contact) / 2, (listed, len(P.contact))
@@ -608,26 +608,26 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
 
 def test_the_right_hand_side_leaves_the_onsets_of_its_own_state(six_by_six):
     """The step loops take an accepted step's contact onsets from its last
-    right-hand side (kernels.take_onsets): after rhs at a sample's state they
+    right-hand side (panel_contact.take_onsets): after rhs at a sample's state they
     are the ones contact_onsets finds there with a new candidate list, and
     after rhs at the same pose at rest (every approach speed 0) there are
     none, whatever the evaluation before met."""
     _, model, result = six_by_six["true"]
     P = pack(model)
     n = P.n
-    near = kernels.near_pairs(P)
+    near = panel_contact.near_pairs(P)
     met = 0
     for j in range(len(result.t)):
         y = np.concatenate([result.theta[j], result.omega[j], [0.0, 0.0]])
         kernels.rhs(P, y, near)
         got, want = np.zeros(9), np.zeros(9)
-        kernels.take_onsets(near, result.t[j], got)
+        panel_contact.take_onsets(near, result.t[j], got)
         kernels.contact_onsets(P, y, result.t[j], want, new_list(P))
         assert np.array_equal(got, want)
         met += want[1] > 0.0
         kernels.rhs(P, np.concatenate([result.theta[j], np.zeros(n + 2)]), near)
         rest = np.zeros(9)
-        kernels.take_onsets(near, result.t[j], rest)
+        panel_contact.take_onsets(near, result.t[j], rest)
         assert np.array_equal(rest, np.zeros(9))
     assert met >= 3, met
 

@@ -10,7 +10,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from panel_deploy.build import build_model
-from panel_deploy.dynamics import articulated, kernels, rosenbrock, simulate
+from panel_deploy.dynamics import articulated, closure, kernels, rosenbrock, simulate, stiff
 from panel_deploy.dynamics.pack import EXACT, PENALTY, TREE, pack
 from panel_deploy.model import AirParameters, Body, Model, State, box_inertia
 from panel_deploy.scene import SimulationSection, load_scene
@@ -165,7 +165,7 @@ def dense_dynamics(P, y):
     qdd = np.linalg.solve(M, Q)
     if P.method != EXACT:
         return qdd, dissipation, 0.0
-    c, J, gamma = kernels.closure_jacobian(P, R, p, w, vo, S, acc)
+    c, J, gamma = closure.closure_jacobian(P, R, p, w, vo, S, acc)
     Y = np.linalg.solve(M, J.T)
     G = J @ Y
     G += np.eye(len(c)) * (P.regularisation * np.diag(G).max() + 1e-300)
@@ -193,7 +193,7 @@ def test_rhs_is_the_dense_solve(model):
 @pytest.mark.parametrize("h", [1e-5, 1e-4, 1e-3])
 def test_structured_w_step_is_the_dense_step(model, h):
     """One ROS34PW2 step with the O(n) W-solve against the step with the dense blocks
-    A = -M^-1 K, B = -M^-1 C of the same K, C (kernels.stiff_jacobian). (For the
+    A = -M^-1 K, B = -M^-1 C of the same K, C (stiff.stiff_jacobian). (For the
     exact closure the dense blocks add the constraint's projection, which the
     O(n) W leaves out: a W-method's order does not depend on its matrix; the
     simulation test below checks that path.)"""
@@ -203,7 +203,7 @@ def test_structured_w_step_is_the_dense_step(model, h):
     N = 2 * P.n + 2
     for y in states(model, 3):
         f = kernels.rhs(P, y, near(P))
-        A, B, ok = kernels.stiff_jacobian(P, y, near(P))
+        A, B, ok = stiff.stiff_jacobian(P, y, near(P))
         assert ok
         y_dense, e_dense, ok_dense = rosenbrock.step(P, y, f, h, A, B, np.empty((7, N)), near(P))
         y_aba, e_aba, ok_aba = rosenbrock.step_terms(P, y, f, h, rosenbrock.terms(P, y, near(P)),

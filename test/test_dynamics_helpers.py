@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from panel_deploy.dynamics.kernels import near_pairs
+from panel_deploy.dynamics.panel_contact import near_pairs
 from panel_deploy.model import Body, ClosureParameters, Hinge, Model, box_inertia
 
 A, B, T, MASS = 0.1, 0.1, 0.005, 0.02
@@ -63,6 +63,16 @@ def ring_2x2(closure="penalty", k_M=1e6, c_M=280.0, baumgarte=1e-3, k_h=(0.1, 0.
 
 
 def near(P):
-    """A new candidate list of the panel contact pairs of ``P`` (kernels.near_pairs),
+    """A new candidate list of the panel contact pairs of ``P`` (panel_contact.near_pairs),
     what a run passes the kernels."""
     return near_pairs(P)
+
+
+def paper_hinge_law(theta, omega, k, c, k_s, c_s):
+    """Eq. (2)-(4) with the contact in parallel with the hinge spring."""
+    tau, energy = -k * theta - c * omega, 0.5 * k * theta**2
+    for over in (theta - np.pi if theta > np.pi else 0.0, theta if theta < 0 else 0.0):
+        if over:
+            tau += -k_s * over - c_s * omega
+            energy += 0.5 * k_s * over**2
+    return tau, energy

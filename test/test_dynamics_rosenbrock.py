@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from panel_deploy.dynamics import kernels, rosenbrock, simulate
+from panel_deploy.dynamics import hinges, kernels, rosenbrock, simulate, stiff
 from panel_deploy.dynamics.integrate import choose_scheme, stiffness
 from panel_deploy.dynamics.pack import pack
 from panel_deploy.errors import ModelError
@@ -81,9 +81,9 @@ def test_stiff_jacobian_holds_the_stiff_spectrum(closure):
     P = pack(model)
     n = P.n
     y = np.array([-0.01, 1.0, 1.0, 0.5, -0.3, 0.2, 0.0, 0.0])
-    assert kernels.contact_mode(y[0]) == 0
+    assert hinges.contact_mode(y[0]) == 0
     Jfd = kernels.rhs_jacobian(P, y, kernels.rhs(P, y, near(P)), near(P))[:2 * n, :2 * n]
-    A, B, ok = kernels.stiff_jacobian(P, y, near(P))
+    A, B, ok = stiff.stiff_jacobian(P, y, near(P))
     assert ok
     Jst = np.block([[np.zeros((n, n)), np.eye(n)], [A, B]])
     ev_fd = np.sort(np.linalg.eigvals(Jfd).real)[:2]

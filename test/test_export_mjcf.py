@@ -171,7 +171,8 @@ def _open_tree(model):
 def test_open_tree_accelerations_match_the_kernel(make):
     """MuJoCo's qacc with constraints off equals our forward dynamics (springs,
     dampers, gravity, cut-hinge spring) at random states inside (0, pi)."""
-    from panel_deploy.dynamics.kernels import near_pairs, rhs
+    from panel_deploy.dynamics.kernels import rhs
+    from panel_deploy.dynamics.panel_contact import near_pairs
     from panel_deploy.dynamics.pack import pack
 
     model = make()
@@ -265,7 +266,7 @@ def test_air_maps_to_the_inertia_box_fluid_model():
     """density = rho C_d and no viscosity; on a panel swinging about its edge hinge
     MuJoCo's fluid torque is the inertia-box formula, 5/8 of our pressure integral
     rho C_d w L^4 omega |omega| / 8 (the difference the module doc states)."""
-    from panel_deploy.dynamics import kernels
+    from panel_deploy.dynamics import kernels, panel_contact
     from panel_deploy.dynamics.pack import pack
     from panel_deploy.model import AirParameters
 
@@ -287,6 +288,6 @@ def test_air_maps_to_the_inertia_box_fluid_model():
         assert d.qfrc_fluid[0] == pytest.approx(box, rel=1e-9)
         P = pack(model)
         ours = kernels.mass_and_bias(P, np.array([theta]), np.array([omega]),
-                                     kernels.near_pairs(P))[1][0]
+                                     panel_contact.near_pairs(P))[1][0]
         assert ours == pytest.approx(-rho * cd * B * A**4 * omega * abs(omega) / 8, rel=1e-12)
         assert d.qfrc_fluid[0] / ours == pytest.approx(5 / 8, rel=1e-4)

@@ -48,9 +48,9 @@ real_access = os.access
 pkg = pathlib.Path(importlib.util.find_spec("panel_deploy").origin).parent
 os.access = lambda p, m, **kw: False if pathlib.Path(p) == pkg else real_access(p, m, **kw)
 import numba
-from panel_deploy.dynamics import kernels
+from panel_deploy.dynamics import hinges
 print(numba.config.CACHE_DIR)
-print(kernels.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5, 0.0)[0])
+print(hinges.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5, 0.0)[0])
 """
 
 
@@ -61,16 +61,16 @@ def test_read_only_package_caches_in_user_folder(tmp_path):
     out = _run(code, xdg, tmp_path)
     target = tmp_path / "xdg" / "panel_deploy" / "numba"
     assert out.stdout.splitlines()[0] == str(target)
-    assert any(p.name.startswith("kernels.hinge_law") for p in target.rglob("*.nbi"))
+    assert any(p.name.startswith("hinges.hinge_law") for p in target.rglob("*.nbi"))
     again = _run(code, xdg, tmp_path)
     assert again.stdout == out.stdout
     assert _numba_cache.NOTICE not in again.stderr  # loaded from the user folder
 
 
 NOTICE_RUN = """
-from panel_deploy.dynamics import kernels
-kernels.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5, 0.0)
-kernels.contact_mode(1.0)
+from panel_deploy.dynamics import hinges
+hinges.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5, 0.0)
+hinges.contact_mode(1.0)
 """
 
 
@@ -104,13 +104,13 @@ def test_dopri5_run_does_not_compile_the_rosenbrock_loop(tmp_path):
 
 TWO_KERNELS = """
 import sys
-from panel_deploy.dynamics import kernels
+from panel_deploy.dynamics import hinges
 from panel_deploy import _numba_cache
-kernels.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5, 0.0)
+hinges.hinge_law(4.0, 0.5, 0.1, 0.01, 1000.0, 0.5, 0.0)
 if sys.argv[1:] == ["build"]:
     _numba_cache.COMPILED_MARKER.write_text("test")
 else:
-    kernels.contact_mode(1.0)
+    hinges.contact_mode(1.0)
 """
 
 
@@ -129,14 +129,14 @@ def test_kernels_compiled_into_the_package_load_without_compiling(tmp_path):
     build = _run(TWO_KERNELS.replace("sys.argv[1:]", '["build"]'), env, tmp_path, locators=None)
     assert _numba_cache.NOTICE in build.stderr
     assert (package / "_kernels_compiled").exists()
-    assert list((package / "dynamics" / "__pycache__").glob("kernels.hinge_law-*.nbi"))
+    assert list((package / "dynamics" / "__pycache__").glob("hinges.hinge_law-*.nbi"))
     # a first run with a cache folder of the user's own: hinge_law comes from the
     # package, contact_mode (not compiled by the build) compiles into the package too
     user_cache = tmp_path / "user-cache"
     user_cache.mkdir()
     first = _run(TWO_KERNELS, {**env, "NUMBA_CACHE_DIR": str(user_cache)}, tmp_path, locators=None)
     assert first.stderr.count(_numba_cache.NOTICE) == 1
-    assert list((package / "dynamics" / "__pycache__").glob("kernels.contact_mode-*.nbi"))
+    assert list((package / "dynamics" / "__pycache__").glob("hinges.contact_mode-*.nbi"))
     assert not list(user_cache.rglob("*.nbi"))
     again = _run(TWO_KERNELS, {**env, "NUMBA_CACHE_DIR": str(user_cache)}, tmp_path, locators=None)
     assert _numba_cache.NOTICE not in again.stderr
@@ -145,7 +145,7 @@ def test_kernels_compiled_into_the_package_load_without_compiling(tmp_path):
     unmarked = _run(TWO_KERNELS, {**env, "NUMBA_CACHE_DIR": str(user_cache)}, tmp_path,
                     locators=None)
     assert _numba_cache.NOTICE in unmarked.stderr
-    assert list(user_cache.rglob("kernels.hinge_law-*.nbi"))
+    assert list(user_cache.rglob("hinges.hinge_law-*.nbi"))
 
 
 def _installed_package(cwd):
@@ -193,7 +193,7 @@ def test_the_packages_kernels_carry_the_kernel_stamp():
         assert kernel._cache._cache_file._source_stamp == _numba_cache.kernel_sources_stamp()
 
 
-# integrate.first_switch calls kernels.contact_mode, in another file
+# integrate.first_switch calls hinges.contact_mode, in another file
 SWITCH = """
 import numpy as np
 from panel_deploy.dynamics import integrate
@@ -203,12 +203,12 @@ print(integrate.first_switch(1, np.array([1.0, -2.0]), np.array([-1.0, -2.0]), 1
 
 def test_a_kernel_recompiles_when_a_file_it_calls_into_changes(tmp_path):
     """numba stamps a cached kernel with its own file only: first_switch, cached
-    before contact_mode (kernels.py) was edited, would keep the old one."""
+    before contact_mode (hinges.py) was edited, would keep the old one."""
     package = _package_copy(tmp_path / "site")
     env = {"PYTHONPATH": str(tmp_path / "site")}
     assert 0.0 < float(_run(SWITCH, env, tmp_path, locators=None).stdout) < 1.0  # theta crosses 0
-    source = package / "dynamics" / "kernels.py"
-    law = "return 0 if theta < 0.0 else (2 if theta > PI else 1)"
+    source = package / "dynamics" / "hinges.py"
+    law = "return 0 if theta < 0.0 else (2 if theta > math.pi else 1)"
     assert law in source.read_text()
     source.write_text(source.read_text().replace(law, "return 1"))  # no limit any more
     assert float(_run(SWITCH, env, tmp_path, locators=None).stdout) == 2.0  # no switch

@@ -1,7 +1,8 @@
 """The numba options of every dynamics kernel, in one place.
 
-``FLOAT_MATH`` is passed to each ``@njit`` of :mod:`.kernels`,
-:mod:`.articulated`, :mod:`.rosenbrock` and :mod:`.integrate`:
+``FLOAT_MATH`` is passed to each ``@njit`` of the modules of
+:mod:`panel_deploy.dynamics` (the right-hand side :mod:`.kernels` and its parts,
+:mod:`.articulated`, :mod:`.stiff`, :mod:`.rosenbrock` and :mod:`.integrate`):
 
 - ``fastmath={"contract"}``: LLVM may fuse a multiply and an add into one
   FMA, rounded once instead of twice, so each fused operation is as accurate
@@ -16,6 +17,15 @@
 
 This file is one of ``_numba_cache.KERNEL_SOURCES``: numba keys its cache by
 signature, not by these options, so a change here must recompile the kernels.
+
+Importing it puts the compile notice in place
+(:func:`panel_deploy._numba_cache.announce_compilation`): every dynamics kernel
+module imports this one (the collision kernels theirs through the dynamics),
+so the notice is there before anything compiles.
 """
+
+from .._numba_cache import announce_compilation
+
+announce_compilation()
 
 FLOAT_MATH = {"fastmath": {"contract"}, "error_model": "numpy"}

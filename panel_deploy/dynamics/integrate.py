@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import ModelError
-from . import articulated, kernels, rosenbrock
+from . import articulated, closure, hinges, kernels, panel_contact, rosenbrock, stiff
 from ._jit import FLOAT_MATH
 from .result import Status, no_onsets
 
@@ -101,7 +101,7 @@ def _off_pace(t0, t, t_end, nsteps, max_steps) -> bool:
 def _modes(theta):
     out = np.empty(theta.shape[0], dtype=np.int64)
     for i in range(theta.shape[0]):
-        out[i] = kernels.contact_mode(theta[i])
+        out[i] = hinges.contact_mode(theta[i])
     return out
 
 
@@ -138,8 +138,8 @@ def first_switch(n, y0, y1, h, tol):
     """
     best = 2.0
     for i in range(n):
-        m0 = kernels.contact_mode(y0[i])
-        m1 = kernels.contact_mode(y1[i])
+        m0 = hinges.contact_mode(y0[i])
+        m1 = hinges.contact_mode(y1[i])
         if m0 == m1:
             continue
         b = _boundary(m0, m1)
@@ -163,7 +163,7 @@ def max_gap(P, y):
     """Largest loop-closure gap at state y, m."""
     n = P.n
     R, p, _, _, _ = kernels.kinematics(P, y[:n], y[n:2 * n])
-    return kernels.largest_gap(P, R, p)
+    return closure.largest_gap(P, R, p)
 
 
 # --- compiled Dormand-Prince 5(4) ---
@@ -193,7 +193,7 @@ def _rms_norm(e, y0, y1, rtol, atol):
 @njit(cache=True, **FLOAT_MATH)
 def _dopri5_step(P, y, f, h, K, near=None):
     """One Dormand-Prince step of length h; returns (y1, err) and leaves rhs(y1) in K[6]
-    (``near``: the run's candidate list, :func:`kernels.near_pairs`)."""
+    (``near``: the run's candidate list, :func:`panel_contact.near_pairs`)."""
     N = y.shape[0]
     K[0] = f
     yi = np.empty(N)
@@ -233,12 +233,12 @@ def record_onsets(P, y, t, t_eval, j, onsets, near, evaluated=False):
     row of the sample interval (t_{k-1}, t_k] that holds t, given j, the next
     sample to fill, with the run's candidate list ``near``: those its last
     right-hand side met if ``evaluated`` (it was at y:
-    :func:`kernels.take_onsets`), else found at y
+    :func:`panel_contact.take_onsets`), else found at y
     (:func:`kernels.contact_onsets`)."""
     k = j - 1 if t <= t_eval[j - 1] else j
     if k < t_eval.shape[0]:
         if evaluated:
-            kernels.take_onsets(near, t, onsets[k])
+            panel_contact.take_onsets(near, t, onsets[k])
         else:
             kernels.contact_onsets(P, y, t, onsets[k], near)
 
@@ -263,7 +263,7 @@ def _compiled_loop(scheme):
 
     ``scheme`` DOPRI5: explicit Dormand-Prince 5(4) (scipy RK45's tableau and
     step control). ROS34PW2: the Rosenbrock-W method of :mod:`.rosenbrock`
-    with the stiff Jacobian (:func:`kernels.stiff_jacobian`, or for
+    with the stiff Jacobian (:func:`stiff.stiff_jacobian`, or for
     ROS34PW2_TERMS :func:`rosenbrock.terms`; about one RHS call) taken at the
     start of every step; the first stage reuses f(y), so a
     step costs 4 RHS calls, the stiff Jacobian and one factorisation of W (an
@@ -312,7 +312,7 @@ def _compiled_loop(scheme):
         landed = counts[5] != 0
         rejected = counts[6] != 0  # the last attempt was rejected by the error test
         expo = -1.0 / (rosenbrock.ERROR_ORDER if implicit else 5)
-        near = kernels.near_pairs(P)
+        near = panel_contact.near_pairs(P)
         if nfev == 0:
             f = kernels.rhs(P, y, near)
             nfev = 1
@@ -342,7 +342,7 @@ def _compiled_loop(scheme):
                     if structured:
                         jac = rosenbrock.terms(P, y, near)
                     else:
-                        A, B, ok = kernels.stiff_jacobian(P, y, near)
+                        A, B, ok = stiff.stiff_jacobian(P, y, near)
                     njev += 1
                     fresh = True
                 if structured:
@@ -441,7 +441,7 @@ STIFF_STEP = 2e-4
 def stiffness(P, y) -> float:
     """Spectral radius (1/s) of the stiff part of the Jacobian at state y."""
     n = P.n
-    A, B, ok = kernels.stiff_jacobian(P, y, kernels.near_pairs(P))
+    A, B, ok = stiff.stiff_jacobian(P, y, panel_contact.near_pairs(P))
     if not (ok and np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
         return math.inf
     J = np.block([[np.zeros((n, n)), np.eye(n)], [A, B]])
@@ -528,7 +528,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
     cls = getattr(scipy.integrate, name)
     n, N = P.n, len(y0)
     counts = {"nfev": 0, "njev": 0}
-    near = kernels.near_pairs(P)
+    near = panel_contact.near_pairs(P)
 
     def fun(t, y):
         counts["nfev"] += 1
@@ -660,7 +660,7 @@ def integrate_blocks(P, y0, t_eval, settings, max_steps, gap_limit, stops=None):
                          f"got {settings.method!r}")
     stops = (len(t_eval) - 1,) if stops is None else stops
     try:
-        finite = bool(np.all(np.isfinite(kernels.rhs(P, y0, kernels.near_pairs(P)))))
+        finite = bool(np.all(np.isfinite(kernels.rhs(P, y0, panel_contact.near_pairs(P)))))
     except ZeroDivisionError:
         finite = False
     if not finite:

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import FLAT_TOLERANCE, Model, hinge_order
-from .kernels import cut_rates, hinge_law
+from .closure import cut_rates
+from .hinges import hinge_law
 from .pack import pack
 from .result import ENERGY_FLOOR, SimulationResult
 

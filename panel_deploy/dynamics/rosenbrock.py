@@ -3,7 +3,7 @@
 ROS34PW2 (Rang & Angermann, BIT 45, 2005): 4 stages, order 3 with an embedded
 order-2 solution, L-stable, stiffly accurate, and a W-method: its order does
 not depend on the matrix J used in ``W = I - h gamma J``. So J need only
-hold the stiff terms, for stability: :func:`kernels.stiff_jacobian` gives
+hold the stiff terms, for stability: :func:`stiff.stiff_jacobian` gives
 them at about the cost of one RHS call, against 2 n calls for a
 finite-difference Jacobian (which, reused over steps to save them, went
 stale at contact changes and forced ~1e-6 s steps on the paper scene).
@@ -21,7 +21,7 @@ system ``(I - h gamma B - h^2 gamma^2 A) v = r_v + h gamma A r_x``, ``x = r_x
 + h gamma v``.
 
 With ``A = -M^-1 K``, ``B = -M^-1 C`` and K, C diagonal plus rank r
-(:func:`kernels.stiff_terms`: hinge springs and contact on the diagonal, one
+(:func:`stiff.stiff_terms`: hinge springs and contact on the diagonal, one
 row per cut hinge and five more per penalty closure), that system times M is
 ``(M + h gamma C + h^2 gamma^2 K) v = ...``: the mass matrix plus a joint-space
 diagonal, which the articulated-body algorithm factors in O(n), plus rank r,
@@ -42,7 +42,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from . import articulated, kernels
+from . import articulated, kernels, stiff
 from ._jit import FLOAT_MATH
 
 GAMMA = 4.3586652150845900e-01
@@ -143,10 +143,10 @@ def _jac_times(n, A, B, u, out):
 @njit(cache=True, **FLOAT_MATH)
 def terms(P, y, near):
     """The stiff Jacobian at y for :func:`step_terms`: (S, I6, Jb, hb, Kd, Cd,
-    U, kk, cc), the terms of :func:`kernels.stiff_terms` with the joint screws S,
+    U, kk, cc), the terms of :func:`stiff.stiff_terms` with the joint screws S,
     the spatial inertias I6 of the mass matrix (:mod:`.articulated`) and the
     body inertias (Jb, hb) they are made of (:func:`kernels.body_inertias`)."""
-    kin, Kd, Cd, U, kk, cc = kernels.stiff_terms(P, y, near)
+    kin, Kd, Cd, U, kk, cc = stiff.stiff_terms(P, y, near)
     R, p, _, _, S = kin
     Jb, hb = kernels.body_inertias(P, R, p)
     return S, articulated.inertias(P, Jb, hb), Jb, hb, Kd, Cd, U, kk, cc
@@ -305,7 +305,7 @@ def step(P, y, f, h, A, B, K, near):
     difference to the embedded order-2 one, and False if ``W`` is singular
     (the caller shortens the step).
     ``near``: the run's candidate list of panel contact pairs
-    (:func:`kernels.near_pairs`).
+    (:func:`panel_contact.near_pairs`).
     """
     n = P.n
     N = y.shape[0]

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import ModelError
 from ..model import Model, State
-from . import kernels
+from . import closure, kernels
 from .integrate import integrate_blocks
 from .pack import pack
 from .report import total_energy
@@ -211,7 +211,7 @@ def _result(P, t, run, method, wall, gap_limit) -> SimulationResult:
         energy["dissipated"][j], energy["constraint_work"][j] = y[2 * n], y[2 * n + 1]
         if m:
             sigma[j] = np.linalg.svd(J, compute_uv=False)[::-1][:k_sigma]
-            cut_theta[j] = kernels.cut_angles(P, R[j, P.body])  # kernel body order
+            cut_theta[j] = closure.cut_angles(P, R[j, P.body])  # kernel body order
     return SimulationResult(
         t=t, theta=Y[:, :n].copy(), omega=Y[:, n:2 * n].copy(),
         rotation=R, position=p, linear_velocity=v, angular_velocity=w,

@@ -1,4 +1,5 @@
-"""Saving and loading sampled trajectories (``simulate --out``, ``collide``).
+"""Saving and loading sampled trajectories (``simulate --out``, ``collide``), and
+a loaded one checked against its stored scene (:func:`check_stored_trajectory`).
 
 Format: one ``.npz`` file (numpy's zip of ``.npy`` arrays, readable without this
 package), written to a temporary file and renamed into place so that an
@@ -36,7 +37,8 @@ import yaml
 
 from .dynamics.result import ONSET_COLUMNS, PER_SAMPLE, SimulationResult, Status, no_onsets
 from .errors import SceneError, TrajectoryError, shown
-from .validate import foreign_file, load_yaml, yaml_problem
+from .kinematics import forward_kinematics
+from .validate import check_finite, foreign_file, load_yaml, yaml_problem
 
 FORMAT_VERSION = 4
 #: Versions :func:`load_trajectory` reads (2: the columns of ``theta``,
@@ -277,7 +279,6 @@ def _scalar(path, data, name, kind):
 
 def _check_arrays(path, data):
     """Dtype, shape and sample count of every stored per-sample array."""
-    from .validate import check_finite
 
     def float_array(name, ndim):
         a = data[name]
@@ -335,3 +336,49 @@ def _check_arrays(path, data):
         if not np.all((k >= 0) & np.isfinite(k)):  # NaN fails too
             i = int(np.argmin((k >= 0) & np.isfinite(k)))
             raise TrajectoryError(f"{path}: {name}[{i}] = {k[i]}: expected a finite number >= 0")
+
+
+#: Largest disagreement (m, and in rotation matrix entries) between a stored
+#: pose and the one recomputed from the stored angles: round-off of the
+#: forward kinematics, with room for a file written on another machine.
+POSE_TOLERANCE = 1e-6
+
+
+def check_stored_trajectory(where, result, model):
+    """A loaded trajectory checked against the model of its stored scene.
+
+    ``t``, ``theta`` and ``omega`` must be finite (first bad index named);
+    theta/omega must have one column per coordinate of ``model``; stored poses
+    (if ``result`` has them) must have one row per body and agree with the
+    poses recomputed from theta within :data:`POSE_TOLERANCE`. Raises
+    :class:`~panel_deploy.errors.TrajectoryError` naming ``where`` and the array.
+    """
+    for name in ("t", "theta", "omega"):
+        check_finite(name, getattr(result, name), str(where), TrajectoryError)
+    n, nb = model.n_coords, model.n_bodies
+    for name in ("theta", "omega"):
+        a = np.asarray(getattr(result, name))
+        if name == "omega" and a.ndim == 1 and len(a) == len(result.t):
+            continue  # a recording without velocities (encoders): one placeholder per sample
+        if a.ndim != 2 or a.shape[1] != n:
+            raise TrajectoryError(f"{where}: {name} has shape {a.shape}; the stored scene's "
+                                  f"model has {n} hinge coordinates")
+    rotation, position = getattr(result, "rotation", None), getattr(result, "position", None)
+    if rotation is None or position is None:
+        return
+    rotation, position = np.asarray(rotation), np.asarray(position)
+    if position.shape[1:] != (nb, 3) or rotation.shape[1:] != (nb, 3, 3):
+        raise TrajectoryError(f"{where}: position/rotation have shapes {position.shape}, "
+                              f"{rotation.shape}; the stored scene's model has {nb} bodies")
+    s = len(result.t)
+    for j in sorted({0, s // 2, s - 1}):
+        R, p = forward_kinematics(model, result.theta[j])
+        for name, stored, computed in (("position", position[j], p), ("rotation", rotation[j], R)):
+            err = np.abs(np.asarray(stored) - computed)
+            if not np.all(err <= POSE_TOLERANCE):  # NaN fails too
+                b = int(np.argmax(np.nan_to_num(err, nan=np.inf).reshape(nb, -1).max(axis=1)))
+                raise TrajectoryError(
+                    f"{where}: {name}[{j}, {b}] ({model.bodies[b].name}) differs from the pose "
+                    f"its theta gives in the stored scene by {float(np.nanmax(err)):.3g} "
+                    f"(tolerance {POSE_TOLERANCE:g}): the poses or the scene do not belong to "
+                    "these angles")

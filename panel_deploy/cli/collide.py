@@ -8,8 +8,8 @@ import sys
 from ..collision import CollisionSettings, check_trajectory
 from ..errors import SceneError
 from ..record.reader import is_mcap
-from ..trajectory_io import load_trajectory
-from ..validate import check_stored_trajectory, first_non_finite_value
+from ..trajectory_io import check_stored_trajectory, load_trajectory
+from ..validate import first_non_finite_value
 
 
 def collide_command(args) -> int:

@@ -34,6 +34,7 @@ from panel_deploy.dynamics.report import hinge_angles
 from panel_deploy.errors import PanelDeployError
 from panel_deploy.kinematics import forward_kinematics
 from panel_deploy.optimise import load_stiffness
+from panel_deploy.fold.ranking import resolve_circuit
 from panel_deploy.optimise.io import load_damping
 from panel_deploy.scene import load_scene, resolve_scene
 
@@ -57,7 +58,7 @@ def main(argv=None):
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = p.parse_args(argv)
     try:
-        scene = load_scene(resolve_scene(args.scene), args.set)
+        scene = resolve_circuit(load_scene(resolve_scene(args.scene), args.set))
         sim = scene.simulation
         sim = replace(sim, t_end=args.t_end,
                       samples=round((sim.samples - 1) * args.t_end / sim.t_end) + 1)

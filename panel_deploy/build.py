@@ -33,19 +33,25 @@ def cell_centre(cell, rows, cols, a, b) -> np.ndarray:
 def scene_design(scene: Scene):
     """The fold design of a scene's array, circuit, ground and merges, as
     :func:`panel_deploy.fold.design` makes it (it may not pack, and merges may
-    be refused: the design says why). ``fold.circuit: auto`` is the circuit
-    :func:`panel_deploy.fold.ranking.resolve_circuit` chooses.
+    be refused: the design says why).
+
+    A scene with ``fold.circuit: auto`` is refused: its circuit is chosen by
+    screening simulations of the candidates
+    (:func:`panel_deploy.fold.ranking.resolve_circuit`), which build models
+    themselves, so it is resolved before a model is built (the command line
+    and the array_model node do), not inside building one.
 
     Raises
     ------
     SceneError
-        If the circuit, ground or merge list is invalid for the array, or
-        ``auto`` finds no circuit.
+        If the circuit, ground or merge list is invalid for the array, or the
+        circuit is ``auto``.
     """
-    from .fold.ranking import resolve_circuit
-
-    scene = resolve_circuit(scene)
     arr, f = scene.array, scene.fold
+    if f.circuit == "auto":
+        raise SceneError("fold.circuit", "auto: resolve the scene first "
+                                         "(panel_deploy.fold.ranking.resolve_circuit screens the "
+                                         "candidate circuits)")
     try:
         return fold.design(arr.rows, arr.cols, circuit=f.circuit, ground=f.ground, merge=f.merge)
     except DesignError as e:
@@ -121,7 +127,8 @@ def build_model(scene: Scene, design=None) -> Model:
     ------
     SceneError
         For a design that does not pack, unknown hinge names in
-        ``hinges.overrides``, or a ``closure.cut_hinge`` that is not a hinge.
+        ``hinges.overrides``, a ``closure.cut_hinge`` that is not a hinge, or
+        ``fold.circuit: auto`` (:func:`scene_design`).
     """
     d = design if design is not None else design_of(scene)
     arr = scene.array

@@ -160,13 +160,16 @@ def test_auto_resolves_to_the_top_ranked_circuit_once_per_scene(soft, ranked, mo
     assert chosen.data["fold"]["circuit"] == index
     assert chosen.data["fold"]["circuit_choice"]["index"] == index
     assert soft.data["fold"]["circuit"] == "auto"  # the loaded scene is left as it was
-    assert scene_design(soft).circuit == circuit_by_index(4, 4, index)
-    # once per scene: loading it again, or building it, ranks nothing
+    assert scene_design(chosen).circuit == circuit_by_index(4, 4, index)
+    # once per scene: loading it again and resolving it ranks nothing
     monkeypatch.setattr(ranking, "rank_circuits", lambda *a, **k: pytest.fail("ranked again"))
     again = load_scene(PAPER, SOFT)
     assert resolve_circuit(again).fold.circuit == index
-    assert build_model(again).n_bodies == build_model(chosen).n_bodies
     assert resolve_circuit(chosen) is chosen  # a circuit index is left alone
+    # building is no screening: a scene still on auto is refused, naming the key
+    for build in (build_model, scene_design):
+        with pytest.raises(SceneError, match="^fold.circuit: auto: resolve the scene first"):
+            build(again)
 
 
 def test_next_ranked_moves_down_the_ranking_saying_why(soft, ranked):
@@ -207,7 +210,7 @@ def test_auto_refusals_are_one_line_naming_fold_circuit(soft):
     # every packing circuit refused by the scene (a hinge override naming no hinge)
     unbuildable = load_scene(PAPER, [*SOFT, "hinges.overrides={nope: 0.1}"])
     with pytest.raises(SceneError) as e:
-        build_model(unbuildable)
+        resolve_circuit(unbuildable)
     text = str(e.value)
     assert text.startswith("fold.circuit: auto: no packing circuit can be built from this scene "
                            "(circuit 0: not built: hinges.overrides.nope: no such hinge")

@@ -83,8 +83,9 @@ def _compared(d, args):
     from ..collision import CollisionSettings
     from ..record.compare import collision_report, compared
     from ..scene import load_scene, resolve_scene
+    from .args import chosen_circuit
 
-    beside = compared(d, load_scene(resolve_scene(args.compare)), args.compare, args.release)
+    beside = compared(d, chosen_circuit(load_scene(resolve_scene(args.compare))), args.compare, args.release)
     return beside, collision_report(beside, d, CollisionSettings.from_scene(d.scene))
 
 

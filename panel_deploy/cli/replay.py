@@ -100,5 +100,6 @@ def _compared(d, args):
     (the scene is compared as written)."""
     from ..record.compare import compared
     from ..scene import load_scene, resolve_scene
+    from .args import chosen_circuit
 
-    return compared(d, load_scene(resolve_scene(args.compare)), args.compare, args.release)
+    return compared(d, chosen_circuit(load_scene(resolve_scene(args.compare))), args.compare, args.release)

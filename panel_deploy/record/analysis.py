@@ -42,8 +42,9 @@ def recorded_scene(path, scene: str | None = None, namespace: str | None = None,
                    overrides=(), scene_flag: str = "--scene") -> tuple:
     """``(recording, scene)``: the recording at ``path`` and the scene its
     deployment ran (``scene``, a file or shipped name, when given), with
-    ``overrides`` (``--set`` items) applied. ``scene_flag`` is the flag that
-    names a scene, for the message when the recording has none.
+    ``overrides`` (``--set`` items) applied and ``fold.circuit: auto``
+    resolved (:func:`~panel_deploy.fold.ranking.resolve_circuit`). ``scene_flag``
+    is the flag that names a scene, for the message when the recording has none.
 
     Raises
     ------
@@ -52,11 +53,12 @@ def recorded_scene(path, scene: str | None = None, namespace: str | None = None,
     SceneError
         ``scene`` or an override is not valid.
     """
+    from ..fold.ranking import resolve_circuit
     from ..scene import apply_overrides, load_scene, resolve_scene, scene_from_dict
 
     recording = open_recording(path, namespace)
     if scene:
-        return recording, load_scene(resolve_scene(scene), overrides)
+        return recording, resolve_circuit(load_scene(resolve_scene(scene), overrides))
     parsed = recording.scene()
     if parsed is None:
         cut = f" (the file was cut short: {recording.truncated})" if recording.truncated else ""
@@ -66,9 +68,10 @@ def recorded_scene(path, scene: str | None = None, namespace: str | None = None,
         return recording, parsed
     data = apply_overrides(parsed.data, overrides)
     try:
-        return recording, scene_from_dict(data, source=parsed.source)
+        overridden = scene_from_dict(data, source=parsed.source)
     except SceneError as e:
         raise SceneError(f"--set {e.path}", e.reason) from None
+    return recording, resolve_circuit(overridden)
 
 
 def read_deployment(path, scene: str | None = None, namespace: str | None = None,

@@ -44,7 +44,7 @@ from scipy.stats import chi2
 from panel_deploy.build import build_model
 from panel_deploy.calibrate import Measured, calibrate, parameters, read_measured
 from panel_deploy.calibrate.scene_out import calibrated_data
-from panel_deploy.calibrate.trajectory import fit_settings, simulate_hinges
+from panel_deploy.dynamics.hinge_trajectory import fit_settings, simulate_hinges
 from panel_deploy.collision import CollisionSettings, check_trajectory
 from panel_deploy.dynamics import simulate
 from panel_deploy.model import hinge_order

@@ -34,7 +34,7 @@ from panel_deploy.dynamics.report import hinge_angles
 from panel_deploy.errors import PanelDeployError
 from panel_deploy.kinematics import forward_kinematics
 from panel_deploy.optimise import load_stiffness
-from panel_deploy.fold.ranking import resolve_circuit
+from panel_deploy.ranking import resolve_circuit
 from panel_deploy.optimise.io import load_damping
 from panel_deploy.scene import load_scene, resolve_scene
 

@@ -37,7 +37,7 @@ def scene_design(scene: Scene):
 
     A scene with ``fold.circuit: auto`` is refused: its circuit is chosen by
     screening simulations of the candidates
-    (:func:`panel_deploy.fold.ranking.resolve_circuit`), which build models
+    (:func:`panel_deploy.ranking.resolve_circuit`), which build models
     themselves, so it is resolved before a model is built (the command line
     and the array_model node do), not inside building one.
 
@@ -50,7 +50,7 @@ def scene_design(scene: Scene):
     arr, f = scene.array, scene.fold
     if f.circuit == "auto":
         raise SceneError("fold.circuit", "auto: resolve the scene first "
-                                         "(panel_deploy.fold.ranking.resolve_circuit screens the "
+                                         "(panel_deploy.ranking.resolve_circuit screens the "
                                          "candidate circuits)")
     try:
         return fold.design(arr.rows, arr.cols, circuit=f.circuit, ground=f.ground, merge=f.merge)

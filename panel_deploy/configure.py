@@ -187,7 +187,7 @@ def load_array(scene: str, stiffness_file: str = "") -> tuple:
     SceneError, OptimisationError
         The scene or the stiffness file is missing or invalid.
     """
-    from .fold.ranking import resolve_circuit
+    from .ranking import resolve_circuit
     from .scene import load_scene, resolve_scene
 
     if not scene:

@@ -318,7 +318,7 @@ class FoldSection:
 @dataclass(frozen=True)
 class ScreeningSection:
     """How ``fold.circuit: auto`` and ``panel-deploy fold --rank`` screen the
-    packing circuits (:mod:`panel_deploy.fold.ranking`)."""
+    packing circuits (:mod:`panel_deploy.ranking`)."""
 
     # 8: measured with the paper's panels and springs (2 shared cores), 4 x 4 (all
     # 6) 2.2 s, 5 x 6 4.8 s, 6 x 6 8.9 s, 10 x 10 49 s (its first 8 packing circuits

@@ -40,7 +40,7 @@ def deployment_text(s: dict) -> str:
                 f"; smallest closure singular value {s['min_closure_sigma']:.2e}")]
     choice = s.get("circuit_choice")
     if choice:
-        from .fold.ranking import choice_text
+        from .ranking import choice_text
         lines.append(f"circuit {choice['index']}: {choice_text(choice)}")
     lines.append("hinges released at (s): "
                  + ", ".join(f"{n} {fmt(t)}" for n, t in s["release_times"].items()))

@@ -14,7 +14,7 @@ import yaml
 from panel_deploy.build import build_model
 from panel_deploy.calibrate import calibrate, parameters, read_measured
 from panel_deploy.calibrate.residuals import Residuals
-from panel_deploy.calibrate.trajectory import simulate_hinges
+from panel_deploy.dynamics.hinge_trajectory import simulate_hinges
 from panel_deploy.cli import main
 from panel_deploy.model import hinge_order
 from panel_deploy.record import messages as m

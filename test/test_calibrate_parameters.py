@@ -13,7 +13,7 @@ from panel_deploy.build import build_model
 from panel_deploy.calibrate import Measured, calibrate, parameters
 from panel_deploy.calibrate.residuals import Residuals
 from panel_deploy.calibrate.scene_out import calibrated_data
-from panel_deploy.calibrate.trajectory import simulate_hinges
+from panel_deploy.dynamics.hinge_trajectory import simulate_hinges
 from panel_deploy.calibrate.uncertainty import uncertainty
 from panel_deploy.model import hinge_order
 from panel_deploy.scene import load_scene, resolve_scene, scene_from_dict

@@ -31,9 +31,9 @@ def test_dask_run_matches_local_run(scheduler):
 def test_a_ranking_screened_on_dask_is_the_ranking_screened_here(scheduler):
     """fold.circuit: auto's screenings on the cluster (optimise --dask) rank
     the paper's 4 x 4 circuits exactly as one after the other here."""
-    from panel_deploy.fold.ranking import rank_circuits
+    from panel_deploy.ranking import rank_circuits
     from panel_deploy.optimise.parallel import task_map
-    from test_fold_ranking import SOFT, PAPER, same_ranking
+    from test_ranking import SOFT, PAPER, same_ranking
     from panel_deploy.scene import load_scene
 
     soft = load_scene(PAPER, SOFT + ["screening.candidates=3"])

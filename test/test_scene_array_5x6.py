@@ -12,7 +12,7 @@ import pytest
 from panel_deploy.build import build_model
 from panel_deploy.fold import design, kutzbach_dof
 from panel_deploy.fold.kutzbach import body_joints
-from panel_deploy.fold.ranking import resolve_circuit
+from panel_deploy.ranking import resolve_circuit
 from panel_deploy.optimise import evaluate
 from panel_deploy.scene import load_scene, resolve_scene
 

@@ -4,7 +4,8 @@ the panel faces fitted to recorded joint states, with their uncertainty.
 
 - :mod:`.data`: a recording's measured hinges, checked to be worth fitting;
 - :mod:`.parameters`: what is fitted and how values become a model;
-- :mod:`.trajectory`: the simulated angles of the measured hinges at any time;
+- the simulated angles of the measured hinges at any time come from
+  :mod:`panel_deploy.dynamics.hinge_trajectory` (``record.compare`` uses them too);
 - :mod:`.residuals`: weighted residuals and their Jacobian;
 - :mod:`.fit`: the least-squares fit (:func:`calibrate`);
 - :mod:`.uncertainty`: standard errors, intervals, what is not identifiable;

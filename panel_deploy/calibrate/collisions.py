@@ -8,7 +8,7 @@ from __future__ import annotations
 from ..collision import CollisionSettings, StreamCheck, check_trajectory
 from ..dynamics.simulate import simulate
 from .fit import CalibrationResult
-from .trajectory import fit_settings
+from ..dynamics.hinge_trajectory import fit_settings
 
 
 def _event(event, shift: float) -> dict:

@@ -17,10 +17,10 @@ import numpy as np
 
 from .data import first_motion
 from .parameters import Parameters
-from .trajectory import Trajectory, simulate_hinges
+from ..dynamics.hinge_trajectory import Trajectory, simulate_hinges
 
 #: Forward-difference step of the Jacobian in log parameter space (1 %):
-#: the simulation's error (rtol :data:`~.trajectory.FIT_RTOL`) then spoils a
+#: the simulation's error (rtol :data:`~panel_deploy.dynamics.hinge_trajectory.FIT_RTOL`) then spoils a
 #: column by about 1e-4, the curvature by about 0.5 %, which only slows the
 #: Gauss-Newton steps a little: the optimum is where the exact residuals put it.
 #: On the paper scene 1e-3 at rtol 1e-7 gave the same fit to 5 digits in 2.5x the time.

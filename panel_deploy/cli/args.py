@@ -125,7 +125,7 @@ def result_scene(scene, result_file):
 
 def chosen_circuit(scene, workers: int = 1, dask_address: str | None = None):
     """``scene`` with ``fold.circuit: auto`` resolved to the best-ranked circuit
-    (:func:`panel_deploy.fold.ranking.resolve_circuit`: a screening run of
+    (:func:`panel_deploy.ranking.resolve_circuit`: a screening run of
     the first packing circuits, with a progress line, on ``workers`` local
     processes or the Dask scheduler at ``dask_address``), which a note on
     stderr names; any other scene as it is."""
@@ -133,7 +133,7 @@ def chosen_circuit(scene, workers: int = 1, dask_address: str | None = None):
         return scene
     import sys
 
-    from ..fold.ranking import resolve_circuit
+    from ..ranking import resolve_circuit
     from ..optimise.parallel import task_map
     from ..progress import Progress
 

@@ -21,7 +21,7 @@ def fold_command(args) -> int:
     """Print the design of ``--scene`` or of ``--rows/--cols [--circuit]``, or the
     list of an array's designs; ``--plot`` draws the design (for a list, the
     first packable one); ``--scene --rank`` ranks the scene's packing circuits
-    (:func:`~panel_deploy.fold.ranking.rank_circuits`). Exit 0, or 1 if the
+    (:func:`~panel_deploy.ranking.rank_circuits`). Exit 0, or 1 if the
     design asked for does not pack (for a ranking: if no circuit was screened)."""
     if args.scene and args.rank:
         return _rank(scene_of(args, resolve=False), args)
@@ -64,7 +64,7 @@ def _list(rows, cols, limit, args) -> int:
 
 
 def _rank(scene, args) -> int:
-    from ..fold.ranking import rank_circuits
+    from ..ranking import rank_circuits
     from ..optimise.parallel import task_map
 
     arr = scene.array

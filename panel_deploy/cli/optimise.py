@@ -60,7 +60,7 @@ def optimise_ranked(args, scene) -> tuple:
     its circuit, then on the next-ranked circuits in turn while no design
     passes (exit code 1), up to ``optimisation.circuits`` circuits in all.
     Returns ``(exit code, the scene of the last circuit optimised)``."""
-    from ..fold.ranking import next_ranked
+    from ..ranking import next_ranked
 
     for _ in range(scene.optimisation.circuits - 1):
         code, why = optimise_scene(args, scene)

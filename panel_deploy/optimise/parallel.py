@@ -183,7 +183,7 @@ def make_backend(job: Job, workers: int | None = None, dask_address: str | None 
 @contextmanager
 def task_map(workers: int | None = None, dask_address: str | None = None):
     """A ``map(fn, items)`` for independent picklable tasks (a ranking's
-    screenings, :func:`panel_deploy.fold.ranking.rank_circuits`) where the
+    screenings, :func:`panel_deploy.ranking.rank_circuits`) where the
     evaluations of :func:`make_backend` would run: on the Dask scheduler at
     ``dask_address``, else on ``workers`` local processes (0 or None: all
     cores; 1: here, one after the other). Its results come in the order of

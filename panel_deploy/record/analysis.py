@@ -43,7 +43,7 @@ def recorded_scene(path, scene: str | None = None, namespace: str | None = None,
     """``(recording, scene)``: the recording at ``path`` and the scene its
     deployment ran (``scene``, a file or shipped name, when given), with
     ``overrides`` (``--set`` items) applied and ``fold.circuit: auto``
-    resolved (:func:`~panel_deploy.fold.ranking.resolve_circuit`). ``scene_flag``
+    resolved (:func:`~panel_deploy.ranking.resolve_circuit`). ``scene_flag``
     is the flag that names a scene, for the message when the recording has none.
 
     Raises
@@ -53,7 +53,7 @@ def recorded_scene(path, scene: str | None = None, namespace: str | None = None,
     SceneError
         ``scene`` or an override is not valid.
     """
-    from ..fold.ranking import resolve_circuit
+    from ..ranking import resolve_circuit
     from ..scene import apply_overrides, load_scene, resolve_scene, scene_from_dict
 
     recording = open_recording(path, namespace)

@@ -6,7 +6,7 @@ The scene's model must be the recording's array (same bodies and hinges). It is
 deployed from the stowed state, released ``release`` s after the recording's first
 joint state (by default the release offset a ``calibrate`` fit of this recording
 found and wrote under ``calibration.deployment``, else 0), and sampled at the
-recording's joint-state times (:mod:`panel_deploy.calibrate.trajectory`);
+recording's joint-state times (:mod:`panel_deploy.dynamics.hinge_trajectory`);
 :func:`collision_report` checks it there as ``collide`` checks the recording.
 """
 
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..build import build_model
-from ..calibrate.trajectory import SAMPLE_INTERVAL, simulate_hinges
+from ..dynamics.hinge_trajectory import SAMPLE_INTERVAL, simulate_hinges
 from ..errors import SceneError
 from ..model import Model, hinge_order
 from .analysis import RecordedDeployment

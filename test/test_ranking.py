@@ -16,8 +16,9 @@ from panel_deploy.configure import load_array
 from panel_deploy.dynamics import simulate
 from panel_deploy.dynamics.report import hinge_angles
 from panel_deploy.errors import SceneError
-from panel_deploy.fold import circuit_by_index, ranking
-from panel_deploy.fold.ranking import (COLLISION, FLAT, NO_COLLISION, NOT_SCREENED,
+from panel_deploy import ranking
+from panel_deploy.fold import circuit_by_index
+from panel_deploy.ranking import (COLLISION, FLAT, NO_COLLISION, NOT_SCREENED,
                                        ScreeningSettings, rank_circuits, resolve_circuit)
 from panel_deploy.optimise.parallel import task_map
 from panel_deploy.scene import load_scene

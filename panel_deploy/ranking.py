@@ -28,9 +28,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import partial
 
-from ..errors import PanelDeployError, SceneError
-from . import designs
-from .report import short_reason
+from .errors import PanelDeployError, SceneError
+from .fold import designs
+from .fold.report import short_reason
 
 #: Circuits examined for packing at most while looking for the candidates
 #: (a design costs 1-40 ms, 4 x 4 .. 10 x 10).
@@ -275,8 +275,8 @@ def screen_circuit(scene, index: int, settings: ScreeningSettings) -> Screening:
     circuit (a merge list, hinge override or cut hinge naming another
     circuit's hinges) gives :data:`NOT_SCREENED` with the reason.
     """
-    from ..build import build_model
-    from ..optimise.evaluate import objective, run_deployment
+    from .build import build_model
+    from .optimise.evaluate import objective, run_deployment
 
     start = time.perf_counter()
     candidate = settings.scene(scene.replace(fold=replace(scene.fold, circuit=index)))

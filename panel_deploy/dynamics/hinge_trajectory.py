@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
-from ..dynamics.simulate import simulate
+from .simulate import simulate
 from ..model import Model, hinge_order
 
 #: Spacing of the simulation's samples, s: the interpolation between them

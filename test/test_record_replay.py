@@ -7,9 +7,11 @@ import subprocess
 import sys
 import time
 from collections import defaultdict
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from hostile import file_size_limit
 
 from panel_deploy.build import build_model
@@ -198,6 +200,19 @@ def test_compare_refusals_are_one_line(recording, tmp_path, capsys, args, parts)
     assert main(["replay", str(recording), *args, *out]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and all(p in err[0] for p in parts), err
+
+
+def test_compare_on_another_circuit_names_a_hinge_it_lacks(recording, tmp_path, capsys):
+    """The same 4 x 4 array on circuit 0: as many bodies and hinges as the
+    recording's, so the counts alone cannot say why it is another array."""
+    data = yaml.safe_load(Path(resolve_scene("paper_4x4")).read_text())
+    data["fold"]["circuit"] = 0
+    scene = tmp_path / "circuit0.yaml"
+    scene.write_text(yaml.safe_dump(data))
+    assert main(["collide", str(recording), "--compare", str(scene)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "(12 bodies, 12 hinges against 12 and 12; the recording's " in err[0], err
+    assert " is not in it)" in err[0]
 
 
 def test_collide_compare_checks_the_scene_s_deployment_on_the_recording_s_times(recording,

@@ -78,7 +78,8 @@ def compared(d: RecordedDeployment, scene, source: str, release: float | None = 
             or [h.name for h in model.hinges] != [h.name for h in d.model.hinges]):
         raise SceneError("--compare", f"{source} is another array than the recording's "
                                       f"({len(model.bodies)} bodies, {len(model.hinges)} hinges "
-                                      f"against {len(d.model.bodies)} and {len(d.model.hinges)})")
+                                      f"against {len(d.model.bodies)} and {len(d.model.hinges)}; "
+                                      f"{_first_difference(model, d.model)})")
     if release is None:
         release = release_of(scene, d.recording.path)
     names = [model.hinges[h].name for h in hinge_order(model)[:model.n_coords]]
@@ -86,6 +87,19 @@ def compared(d: RecordedDeployment, scene, source: str, release: float | None = 
     trajectory = simulate_hinges(model, scene.simulation, span, names)
     return Compared(source, model, release, names, trajectory.angles(d.track.t - release),
                     trajectory.success, trajectory.message)
+
+
+def _first_difference(model, recorded) -> str:
+    """What tells ``model`` from the recording's model ``recorded`` first: a body
+    or hinge of the recording that ``model`` lacks (the same counts on another
+    circuit differ only so), else the order of their names."""
+    for kind, mine, theirs in (("body", model.bodies, recorded.bodies),
+                               ("hinge", model.hinges, recorded.hinges)):
+        names = {x.name for x in mine}
+        missing = [x.name for x in theirs if x.name not in names]
+        if missing:
+            return f"the recording's {kind} {missing[0]} is not in it"
+    return "the same bodies and hinges in another order"
 
 
 def collision_report(beside: Compared, d: RecordedDeployment, settings):

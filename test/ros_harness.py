@@ -16,6 +16,7 @@ import rclpy
 from action_msgs.msg import GoalStatusArray
 from rclpy.action import ActionClient
 from rclpy.action.client import ClientGoalHandle
+from rclpy.exceptions import InvalidHandle
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.qos import qos_profile_action_status_default
 from rclpy.node import Node
@@ -89,7 +90,13 @@ class Client:
 
     def _spin(self):
         while not self._closing.is_set():
-            self.executor.spin_once(timeout_sec=0.05)
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except InvalidHandle:
+                # A publisher or subscription the test destroyed while this wait
+                # was being set up (seen in CI): the next wait is built without it.
+                # Uncaught, it ended this thread and the client stopped spinning.
+                continue
 
     def listen(self, msg_type, topic, qos=messages.qos(contract.EVENTS)):
         """The list every message on ``topic`` is appended to (one subscription per topic)."""

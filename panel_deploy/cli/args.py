@@ -145,3 +145,13 @@ def chosen_circuit(scene, workers: int = 1, dask_address: str | None = None):
           f"{len(c['screened'])} screened ({c['outcome']}; panel-deploy fold --rank shows the "
           "ranking)", file=sys.stderr)
     return scene
+
+
+def compared_scene(d, args):
+    """``--compare SCENE``'s deployment beside the recorded deployment ``d``, at its
+    times (:func:`panel_deploy.record.compare.compared`): the scene as written,
+    ``--set`` not applied, ``fold.circuit: auto`` resolved (:func:`chosen_circuit`)."""
+    from ..record.compare import compared
+    from ..scene import load_scene, resolve_scene
+
+    return compared(d, chosen_circuit(load_scene(resolve_scene(args.compare))), args.compare, args.release)

@@ -81,11 +81,10 @@ def _compared(d, args):
     """``(Compared, report)``: ``--compare SCENE``'s deployment beside the recording
     and its collision check with the recording's collision settings."""
     from ..collision import CollisionSettings
-    from ..record.compare import collision_report, compared
-    from ..scene import load_scene, resolve_scene
-    from .args import chosen_circuit
+    from ..record.compare import collision_report
+    from .args import compared_scene
 
-    beside = compared(d, chosen_circuit(load_scene(resolve_scene(args.compare))), args.compare, args.release)
+    beside = compared_scene(d, args)
     return beside, collision_report(beside, d, CollisionSettings.from_scene(d.scene))
 
 

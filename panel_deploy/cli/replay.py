@@ -12,6 +12,7 @@ from ..record.analysis import read_deployment
 from ..record.replay import blueprint, log_deployment
 from ..record.strip import render_strip
 from ..validate import write_atomic
+from .args import compared_scene
 
 
 def _times(text: str) -> list:
@@ -39,7 +40,7 @@ def replay_command(args) -> int:
                                     "a file with --save OUT.rrd, serve with --serve or render "
                                     "--png STRIP.png")
     d = read_deployment(args.recording, args.scene, args.namespace)
-    beside = _compared(d, args) if args.compare else None
+    beside = compared_scene(d, args) if args.compare else None
     if args.png:
         render_strip(d, at, args.png)
         print(f"{len(at)} frames -> {args.png}")
@@ -93,13 +94,3 @@ def replay_command(args) -> int:
         except KeyboardInterrupt:
             print("panel-deploy: stopped serving", file=sys.stderr)
     return 0
-
-
-def _compared(d, args):
-    """``--compare SCENE``'s deployment at the recording's times, ``--set`` not applied
-    (the scene is compared as written)."""
-    from ..record.compare import compared
-    from ..scene import load_scene, resolve_scene
-    from .args import chosen_circuit
-
-    return compared(d, chosen_circuit(load_scene(resolve_scene(args.compare))), args.compare, args.release)

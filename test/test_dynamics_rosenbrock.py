@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from panel_deploy.dynamics import hinges, kernels, rosenbrock, simulate, stiff
-from panel_deploy.dynamics.integrate import choose_scheme, stiffness
+from panel_deploy.dynamics.compiled import choose_scheme, stiffness
 from panel_deploy.dynamics.pack import pack
 from panel_deploy.errors import ModelError
 from panel_deploy.model import State

@@ -82,13 +82,13 @@ def test_compile_notice_once_and_only_when_compiling(tmp_path):
 
 
 ONE_SCHEME = """
-from panel_deploy.dynamics import integrate, rosenbrock, simulate
+from panel_deploy.dynamics import compiled, rosenbrock, simulate
 from panel_deploy.scene import SimulationSection
 from test_dynamics_helpers import plate_on_hinge
 model = plate_on_hinge()
 simulate(model, SimulationSection(t_end=0.05, method="dopri5", samples=3))
-print(len(integrate.COMPILED_LOOPS[integrate.DOPRI5].signatures),
-      len(integrate.COMPILED_LOOPS[integrate.ROS34PW2].signatures),
+print(len(compiled.COMPILED_LOOPS[compiled.DOPRI5].signatures),
+      len(compiled.COMPILED_LOOPS[compiled.ROS34PW2].signatures),
       len(rosenbrock.step.signatures))
 """
 
@@ -188,16 +188,16 @@ def test_the_kernel_stamp_follows_the_sources_contents_not_their_times(tmp_path)
 
 
 def test_the_packages_kernels_carry_the_kernel_stamp():
-    from panel_deploy.dynamics import integrate, kernels
-    for kernel in (kernels.rhs, integrate.COMPILED_LOOPS[integrate.DOPRI5]):
+    from panel_deploy.dynamics import compiled, kernels
+    for kernel in (kernels.rhs, compiled.COMPILED_LOOPS[compiled.DOPRI5]):
         assert kernel._cache._cache_file._source_stamp == _numba_cache.kernel_sources_stamp()
 
 
-# integrate.first_switch calls hinges.contact_mode, in another file
+# switches.first_switch calls hinges.contact_mode, in another file
 SWITCH = """
 import numpy as np
-from panel_deploy.dynamics import integrate
-print(integrate.first_switch(1, np.array([1.0, -2.0]), np.array([-1.0, -2.0]), 1.0, 1e-9))
+from panel_deploy.dynamics import switches
+print(switches.first_switch(1, np.array([1.0, -2.0]), np.array([-1.0, -2.0]), 1.0, 1e-9))
 """
 
 

@@ -7,8 +7,10 @@ import os
 import signal
 import subprocess
 import sys
+import itertools
 import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
 from uuid import uuid4
 
@@ -85,6 +87,7 @@ class Client:
         self._clients = {}
         self._listed = {}
         self._closing = threading.Event()
+        self._apart = itertools.count()
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
 
@@ -97,6 +100,19 @@ class Client:
                 # was being set up (seen in CI): the next wait is built without it.
                 # Uncaught, it ended this thread and the client stopped spinning.
                 continue
+
+    @contextmanager
+    def publisher(self, msg_type, topic, qos):
+        """A publisher of the test's own, destroyed at the end of the ``with``: on
+        a node of its own that the executor never waits on. Destroyed on the
+        spinning node, one left that executor answering nothing more (CI: a
+        task's "cannot use Destroyable because destruction was requested", then
+        the next service call unanswered for 60 s)."""
+        node = Node(f"{self.node.get_name()}_publisher_{next(self._apart)}", context=self.context)
+        try:
+            yield node.create_publisher(msg_type, topic, qos)
+        finally:
+            node.destroy_node()
 
     def listen(self, msg_type, topic, qos=messages.qos(contract.EVENTS)):
         """The list every message on ``topic`` is appended to (one subscription per topic)."""

@@ -169,13 +169,12 @@ def test_an_alias_bomb_on_the_model_topic_is_ignored_at_once(graph, deployment):
     # one such message from anyone on the graph took down collision_monitor and dynamics
     client, publisher, events, diagnostics, markers, _ = graph
     model, result, report = deployment
-    bomb = client.node.create_publisher(String, "/panel_deploy/model", messages.qos(contract.LATCHED))
-    diagnostics.clear()
-    bomb.publish(String(data=alias_bomb(key="array")))
-    wait_for(lambda: any("ignored a model" in s.message and "aliases expand it beyond" in s.message
-                         for s in statuses(diagnostics, messages.WARN)), timeout=10,
-             what="the monitor's warning")
-    client.node.destroy_publisher(bomb)
+    with client.publisher(String, "/panel_deploy/model", messages.qos(contract.LATCHED)) as bomb:
+        diagnostics.clear()
+        bomb.publish(String(data=alias_bomb(key="array")))
+        wait_for(lambda: any("ignored a model" in s.message and "aliases expand it beyond" in s.message
+                             for s in statuses(diagnostics, messages.WARN)), timeout=10,
+                 what="the monitor's warning")
     assert client.trigger("/collision_monitor/reset").success  # the model it had is kept
     diagnostics.clear()
     feed(publisher, model, result, range(20))
@@ -206,29 +205,26 @@ def test_a_model_with_panel_contact_is_ok_only_with_its_contact_onsets(graph):
                              DynamicsParameters(t_end=0.1, rate_hz=200.0))
     result = simulate(model, scene.simulation)
     latched = messages.qos(contract.LATCHED)
-    source = client.node.create_publisher(String, "/panel_deploy/model", latched)
-    verdicts.clear()
-    source.publish(String(data=scene_yaml(scene)))
-    # A new model starts afresh: its first verdict waits for joint states.
-    wait_for(lambda: verdicts and verdicts[-1].message == "waiting for joint states",
-             what="the contact model")
-    feed(publisher, model, result, range(len(result.t)))
-    wait_for(lambda: verdicts and verdicts[-1].samples == len(result.t), what="the samples checked")
-    assert verdicts[-1].level == MonitorVerdict.WARN and verdicts[-1].onsets == 0
-    assert "no contact onsets came: an impact the contact absorbs" in verdicts[-1].message
+    with client.publisher(String, "/panel_deploy/model", latched) as source:
+        verdicts.clear()
+        source.publish(String(data=scene_yaml(scene)))
+        # A new model starts afresh: its first verdict waits for joint states.
+        wait_for(lambda: verdicts and verdicts[-1].message == "waiting for joint states",
+                 what="the contact model")
+        feed(publisher, model, result, range(len(result.t)))
+        wait_for(lambda: verdicts and verdicts[-1].samples == len(result.t), what="the samples checked")
+        assert verdicts[-1].level == MonitorVerdict.WARN and verdicts[-1].onsets == 0
+        assert "no contact onsets came: an impact the contact absorbs" in verdicts[-1].message
 
-    onsets = client.node.create_publisher(ContactOnset, "/dynamics/contact_onsets",
-                                          messages.qos(contract.STREAM))
-    wait_for(lambda: onsets.get_subscription_count() >= 1, what="the monitor's onset subscription")
-    assert client.trigger("/collision_monitor/reset").success
-    encoder = SampleEncoder(model)
-    names, theta, omega, torque = hinge_states(model, result)
-    for j in range(len(result.t)):
-        publisher.publish(messages.joint_state(names, result.t[j], theta[j], omega[j], torque[j]))
-        onsets.publish(encoder.onset(result.t[j], result.contact_onsets[j]))
-    wait_for(lambda: verdicts and verdicts[-1].onsets == len(result.t) - 1, what="the onsets checked")
-    wait_for(lambda: verdicts[-1].level == MonitorVerdict.OK, timeout=5,
-             what=lambda: f"an OK verdict, got {verdicts[-1].message}")
-    assert verdicts[-1].samples == len(result.t) and verdicts[-1].message == "no collision"
-    client.node.destroy_publisher(onsets)
-    client.node.destroy_publisher(source)
+        with client.publisher(ContactOnset, "/dynamics/contact_onsets", messages.qos(contract.STREAM)) as onsets:
+            wait_for(lambda: onsets.get_subscription_count() >= 1, what="the monitor's onset subscription")
+            assert client.trigger("/collision_monitor/reset").success
+            encoder = SampleEncoder(model)
+            names, theta, omega, torque = hinge_states(model, result)
+            for j in range(len(result.t)):
+                publisher.publish(messages.joint_state(names, result.t[j], theta[j], omega[j], torque[j]))
+                onsets.publish(encoder.onset(result.t[j], result.contact_onsets[j]))
+            wait_for(lambda: verdicts and verdicts[-1].onsets == len(result.t) - 1, what="the onsets checked")
+            wait_for(lambda: verdicts[-1].level == MonitorVerdict.OK, timeout=5,
+                     what=lambda: f"an OK verdict, got {verdicts[-1].message}")
+            assert verdicts[-1].samples == len(result.t) and verdicts[-1].message == "no collision"

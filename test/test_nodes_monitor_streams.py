@@ -333,13 +333,10 @@ def test_a_best_effort_publisher_is_a_non_ok_verdict(graph):
     from rclpy.qos import qos_profile_sensor_data
     client, _, diagnostics, events, _ = graph
     new_deployment(client, diagnostics, events)
-    other = client.node.create_publisher(JointState, "/joint_states", qos_profile_sensor_data)
-    try:
+    with client.publisher(JointState, "/joint_states", qos_profile_sensor_data):
         assert _not_ok_within(diagnostics, "offers QoS this monitor cannot take") < 10.0
         s = [s for s in statuses(diagnostics) if "cannot take" in s.message][-1]
         assert s.level == messages.WARN and "reliability" in s.message
-    finally:
-        client.node.destroy_publisher(other)
 
 
 @pytest.mark.parametrize("case", ["foreign names", "a branch hinge missing"])

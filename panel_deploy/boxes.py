@@ -420,8 +420,8 @@ def _facing_face(R, V, n, sign, out):
 
 @njit(cache=True)
 def _face_pressure(Va, Ra, Vb, Rb, n, work):
-    """A face pressed on a face or by an edge (see :func:`contact`,
-    ``pressure``): the face of each box that faces the other along n, whole,
+    """Two boxes pressed together (see :func:`contact`, ``pressure``): the
+    face of each box that faces the other along n, whole,
     and as the normal the bisector of their outward normals, not n. So the
     push does not jump where the least-overlap axis passes from one face's
     normal to the other's (near-parallel faces, 10 x 10 at 0.03-0.06 s: the
@@ -430,7 +430,7 @@ def _face_pressure(Va, Ra, Vb, Rb, n, work):
     3 corners in place of 4 pressed with twice the push; an edge pushed at
     its corners, about 20x the pressure's push there). Returns (count, normal) as
     :func:`contact`; count -1 when a face is seen edge on. The faces' corners
-    replace Va and Vb (8, 3); the FEATURE band's features in work stay."""
+    replace Va and Vb (8, 3), the boxes' corners."""
     _, _, _, _, A, B, angle, _, poly, spare, points, depths, weights = work
     ua = _facing_face(Ra, Va, n, 1.0, Va)
     ub = _facing_face(Rb, Vb, n, -1.0, Vb)
@@ -488,16 +488,20 @@ def contact(Ra, ca, ha, Rb, cb, hb, work, pressure=False):
     way between the two.
 
     Each point has a weight, its share of the pair's stiffness and damping:
-    1 / FACE_POINTS at a corner. With ``pressure``, where either feature is a
-    face (three corners or more), the two boxes' faces that face each other
-    push instead, whole, by a pressure in proportion to the depth over their
-    overlap, along the bisector of their normals (:func:`_face_pressure`,
-    which returns that normal in place of n), at the quadrature points of
+    1 / FACE_POINTS at a corner. With ``pressure`` the two boxes' faces that
+    face each other push instead, whole, whatever the features, by a
+    pressure in proportion to the depth over their overlap, along the
+    bisector of their normals (:func:`_face_pressure`, which returns that
+    normal in place of n), at the quadrature points of
     :func:`_pressure_points`, each weighted by its share of the smaller
     face's area: a face tilted past the band, whose feature is an edge,
-    presses on with its whole face, so the push is continuous where the
-    feature turns from a face to an edge. Two edges or corners still push
-    at the corners.
+    presses on with its whole face, and so do two faces whose edges cross,
+    so the push is continuous where the features turn from faces to edges
+    or the least-overlap axis passes between the faces' normals and their
+    edges' products. It still changes at once where a box's facing face
+    does (n half way between two of its faces' normals: a corner or edge
+    struck at 45 degrees, an impact), and the corners push where a face is
+    seen edge on.
 
     Returns ``(count, normal)``: the number of points that interfere (0 when
     the separating-axis test finds the boxes apart) and n (a 3-tuple). The
@@ -511,12 +515,13 @@ def contact(Ra, ca, ha, Rb, cb, hb, work, pressure=False):
     n = (s * axis[0], s * axis[1], s * axis[2])
     eps = FEATURE * min(min(ha[0], ha[1], ha[2]), min(hb[0], hb[1], hb[2]))
     Va, Vb, Fa, Fb, A, B, angle, corners2, poly, spare, points, depths, weights = work
-    ma, _ = _feature(corners_into(Ra, ca, ha, Va), n, 1.0, eps, Fa)
-    mb, _ = _feature(corners_into(Rb, cb, hb, Vb), n, -1.0, eps, Fb)
-    if pressure and (ma >= 3 or mb >= 3):
-        count, normal = _face_pressure(Va, Ra, Vb, Rb, n, work)
+    if pressure:
+        count, normal = _face_pressure(corners_into(Ra, ca, ha, Va), Ra, corners_into(Rb, cb, hb, Vb), Rb,
+                                       n, work)
         if count >= 0:
             return count, normal
+    ma, _ = _feature(corners_into(Ra, ca, ha, Va), n, 1.0, eps, Fa)
+    mb, _ = _feature(corners_into(Rb, cb, hb, Vb), n, -1.0, eps, Fb)
     e1, e2 = plane_axes(n)
     _plane(Fa, ma, n, e1, e2, A, angle)
     _plane(Fb, mb, n, e1, e2, B, angle)

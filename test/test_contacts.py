@@ -776,7 +776,7 @@ def test_mujoco_box_contacts_on_the_export_hold_the_stacks_as_ours_do(six_by_six
 def test_a_press_says_which_compliance_its_verdict_depends_on():
     from panel_deploy.collision.check import compliance_note
     from panel_deploy.scene import IMPACT_SPEED
-    from panel_deploy.collision.monitor import CollisionEvent
+    from panel_deploy.collision.event import CollisionEvent
 
     def event(bodies, speed):
         return CollisionEvent(0.1, None, 20, 0, bodies, ("a", "b"), -1.1e-4, np.zeros(3),

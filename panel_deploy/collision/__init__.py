@@ -11,8 +11,10 @@ collision, and what is guaranteed between samples, is stated in
 """
 
 from .check import CollisionReport, TrajectoryCheck, check_trajectory
+from .event import CollisionEvent
 from .geometry import BoxSet, PairGeometry
-from .monitor import CollisionEvent, CollisionMonitor, CollisionSettings
+from .monitor import CollisionMonitor
+from .settings import CollisionSettings
 from .stream import StreamCheck
 
 __all__ = ["BoxSet", "CollisionEvent", "CollisionMonitor", "CollisionReport", "CollisionSettings",

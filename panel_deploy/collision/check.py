@@ -16,7 +16,9 @@ import numpy as np
 
 from ..model import Model
 from ..scene import IMPACT_SPEED
-from .monitor import CollisionEvent, CollisionMonitor, CollisionSettings
+from .event import CollisionEvent
+from .monitor import CollisionMonitor
+from .settings import CollisionSettings
 
 
 @dataclass

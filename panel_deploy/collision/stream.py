@@ -35,7 +35,7 @@ from ..errors import TrajectoryError
 from ..model import Model
 from ..sensing import TreeCoordinates
 from .check import TrajectoryCheck
-from .monitor import CollisionSettings
+from .settings import CollisionSettings
 
 #: Samples whose D_j a live check keeps (between KEEP and 2 KEEP).
 KEEP = 4096

@@ -315,6 +315,16 @@ def largest_steps(poses, m, Ra=np.eye(3)):
             np.abs(np.diff(moments, axis=0)).max())
 
 
+def features_along_least_overlap(Ra, Rb, cb):
+    """How many corners of a and of b (a at the origin) are in the FEATURE band
+    of their extremes along the least-overlap axis: 4 a face, 2 an edge."""
+    _, n, along = least_overlap(Ra, np.zeros(3), HALF, Rb, cb, HALF)
+    n = np.array(n) * np.sign(along)
+    top, low = corners(Ra, np.zeros(3), HALF) @ n, corners(Rb, cb, HALF) @ n
+    eps = FEATURE * HALF[2]
+    return int(np.sum(top >= top.max() - eps)), int(np.sum(low <= low.min() + eps))
+
+
 def test_the_pressure_keeps_its_direction_where_the_least_overlap_axis_passes_to_the_other_face():
     """b tilted 1 mrad about x, pressed 20 um into a, slid along y through the
     place where its own face normal, not a's, becomes the axis of least
@@ -357,25 +367,10 @@ def test_the_pressure_is_continuous_where_a_tilted_face_leaves_the_feature_band(
         lowest = (corners(Rb, np.zeros(3), HALF)[:, 2]).min()
         return Rb, np.array([0.0, 0.0, HALF[2] - lowest - 3e-5])
 
-    found = set()  # b's corners within the band of its lowest along the least-overlap axis
-    for s in (0.0, 1.0):
-        Rb, cb = poses(s)
-        _, n, _ = least_overlap(np.eye(3), np.zeros(3), HALF, Rb, cb, HALF)
-        low = corners(Rb, cb, HALF) @ np.array(n) * np.sign(n[2])
-        found.add(int(np.sum(low <= low.min() + eps)))
+    found = {features_along_least_overlap(np.eye(3), *poses(s))[1] for s in (0.0, 1.0)}
     assert found == features, found
     coarse, fine = largest_steps(poses, 41), largest_steps(poses, 401)
     assert all(f < 0.2 * c + 1e-15 for c, f in zip(coarse, fine)), (coarse, fine)
-
-
-def features_along_least_overlap(Ra, Rb, cb):
-    """How many corners of a and of b (a at the origin) are in the FEATURE band
-    of their extremes along the least-overlap axis: 4 a face, 2 an edge."""
-    _, n, along = least_overlap(Ra, np.zeros(3), HALF, Rb, cb, HALF)
-    n = np.array(n) * np.sign(along)
-    top, low = corners(Ra, np.zeros(3), HALF) @ n, corners(Rb, cb, HALF) @ n
-    eps = FEATURE * HALF[2]
-    return int(np.sum(top >= top.max() - eps)), int(np.sum(low <= low.min() + eps))
 
 
 def test_the_pressure_is_continuous_where_a_face_turns_into_an_edge_crossing_an_edge():

@@ -86,7 +86,7 @@ def main(argv=None):
             if ref.success:
                 break
         mid = len(ref.t) // 2
-        y = np.concatenate([ref.theta[mid], ref.omega[mid], [0.0, 0.0]])
+        y = kernels.state_vector(ref.theta[mid], ref.omega[mid])
         rhs_s, jac_s = kernel_cost(pack(model), y)
         print(f"{closure}: reference (DOPRI5 rtol {ref_rtol:.0e}) {ref.message}, {ref.nsteps} steps; "
               f"RHS {rhs_s * 1e6:.1f} us, "

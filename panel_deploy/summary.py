@@ -34,7 +34,10 @@ def deployment_text(s: dict) -> str:
              f"in {s['wall_time']:.3g} s wall ({s['nsteps']} steps, {s['nfev']} evaluations)",
              f"first flat (every hinge within {s['flat_tolerance']} rad of 0): "
              f"{fmt(s['time_to_flat'], ' s')}",
-             _balance_text(s['energy_balance_error']) + "; "
+             _balance_text(s['energy_balance_error'])
+             + ("" if s.get("contact_energy_error") is None else  # none in older recordings
+                f"; energy the panel contacts' law created or lost {s['contact_energy_error']:.2e} (relative)")
+             + "; "
              f"max constraint gap {s['max_constraint_gap']:.3g} m"
              + ("" if s["min_closure_sigma"] is None else
                 f"; smallest closure singular value {s['min_closure_sigma']:.2e}")]

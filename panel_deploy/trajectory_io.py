@@ -40,11 +40,12 @@ from .errors import SceneError, TrajectoryError, shown
 from .kinematics import forward_kinematics
 from .validate import check_finite, foreign_file, load_yaml, yaml_problem
 
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 #: Versions :func:`load_trajectory` reads (2: the columns of ``theta``,
 #: ``omega`` and ``cut_theta`` unnamed, no ``damping``; 2 and 3: no
-#: ``contact_onsets``).
-READABLE_VERSIONS = (2, 3, 4)
+#: ``contact_onsets``; 2 to 4: no ``energy_contact`` and
+#: ``energy_contact_work``, whose energy balance counts the contacts' stored energy).
+READABLE_VERSIONS = (2, 3, 4, 5)
 _ARRAYS = PER_SAMPLE
 #: The run's scalars: name -> kind (i integer, f number, U text, b bool).
 _SCALARS = {"success": "b", "status": "i", "message": "U", "method": "U", "scheme": "U",

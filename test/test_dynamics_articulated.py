@@ -59,7 +59,7 @@ def states(model, count, seed=1, spread=0.05):
     n = model.n_coords
     for _ in range(count):
         theta = stowed + rng.normal(0.0, spread, n)
-        yield np.concatenate([theta, rng.normal(0.0, 2.0, n), [0.0, 0.0]])
+        yield kernels.state_vector(theta, rng.normal(0.0, 2.0, n))
 
 
 def test_models_take_the_articulated_path(model):
@@ -155,16 +155,17 @@ def test_factor_reports_a_singular_mass_matrix():
 
 
 def dense_dynamics(P, y):
-    """qdd and the constraint forces' power by numpy: ``M^-1 Q`` from the CRBA mass
+    """qdd, the dissipation, the constraint forces' power and the panel
+    contacts' springs' power by numpy: ``M^-1 Q`` from the CRBA mass
     matrix, plus for the exact closure ``M^-1 J^T lambda`` with lambda from
     ``J qdd = -gamma - 2 cdot / T - c / T^2`` (Baumgarte), J M^-1 J^T regularised
     as the package does."""
     n = P.n
-    M, Q, (R, p, w, vo, S), acc, _, dissipation, _ = kernels.mass_and_bias(
+    M, Q, (R, p, w, vo, S), acc, _, _, contact_power, dissipation, _ = kernels.mass_and_bias(
         P, y[:n], y[n:2 * n], near(P))
     qdd = np.linalg.solve(M, Q)
     if P.method != EXACT:
-        return qdd, dissipation, 0.0
+        return qdd, dissipation, 0.0, contact_power
     c, J, gamma = closure.closure_jacobian(P, R, p, w, vo, S, acc)
     Y = np.linalg.solve(M, J.T)
     G = J @ Y
@@ -172,7 +173,7 @@ def dense_dynamics(P, y):
     T = P.baumgarte
     cdot = J @ y[n:2 * n]
     lam = np.linalg.solve(G, -gamma - 2.0 / T * cdot - c / T ** 2 - J @ qdd)
-    return qdd + Y @ lam, dissipation, lam @ cdot
+    return qdd + Y @ lam, dissipation, lam @ cdot, contact_power
 
 
 def test_rhs_is_the_dense_solve(model):
@@ -181,12 +182,13 @@ def test_rhs_is_the_dense_solve(model):
     P = pack(model)
     n = P.n
     for y in states(model, 4):
-        qdd, dissipation, power = dense_dynamics(P, y)
+        qdd, dissipation, power, contact_power = dense_dynamics(P, y)
         f = kernels.rhs(P, y, near(P))
         assert np.abs(f[n:2 * n] - qdd).max() < 1e-9 * np.abs(qdd).max()
         assert np.array_equal(f[:n], y[n:2 * n])
         assert f[2 * n] == dissipation
         assert f[2 * n + 1] == pytest.approx(power, rel=1e-8, abs=1e-12)
+        assert f[2 * n + 2] == contact_power
         assert (power != 0.0) == (P.method == EXACT)
 
 
@@ -200,7 +202,7 @@ def test_structured_w_step_is_the_dense_step(model, h):
     P = pack(model)
     if P.method == EXACT:
         pytest.skip("the dense blocks of the exact closure are another W")
-    N = 2 * P.n + 2
+    N = 2 * P.n + kernels.ACCUMULATORS
     for y in states(model, 3):
         f = kernels.rhs(P, y, near(P))
         A, B, ok = stiff.stiff_jacobian(P, y, near(P))
@@ -221,8 +223,8 @@ def dense_rhs(P):
     n = P.n
 
     def fun(t, y):
-        qdd, dissipation, power = dense_dynamics(P, y)
-        return np.concatenate([y[n:2 * n], qdd, [dissipation, power]])
+        qdd, *integrands = dense_dynamics(P, y)
+        return np.concatenate([y[n:2 * n], qdd, integrands])
     return fun
 
 

@@ -138,7 +138,7 @@ def test_exact_closure_jacobian_and_acceleration():
     hh = 1e-5
     gamma_ref = (fd(constraint, theta + hh * omega) - fd(constraint, theta - hh * omega)) / (2 * hh) @ omega
     assert np.allclose(gamma, gamma_ref, rtol=1e-4, atol=1e-6 * np.abs(gamma_ref).max())
-    qdd = kernels.rhs(P, np.concatenate([theta, omega, [0, 0]]), near(P))[n:2 * n]
+    qdd = kernels.rhs(P, kernels.state_vector(theta, omega), near(P))[n:2 * n]
     T = model.closure.baumgarte
     residual = J @ qdd + gamma + 2 / T * (J @ omega) + c / T**2
     # a random 4-hinge spatial loop is over-constrained (J is 5 x 4 on the loop), so

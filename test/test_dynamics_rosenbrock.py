@@ -9,6 +9,7 @@ import pytest
 
 from panel_deploy.dynamics import hinges, kernels, rosenbrock, simulate, stiff
 from panel_deploy.dynamics.compiled import choose_scheme, stiffness
+from panel_deploy.dynamics.kernels import state_vector
 from panel_deploy.dynamics.pack import pack
 from panel_deploy.errors import ModelError
 from panel_deploy.model import State
@@ -36,7 +37,7 @@ def test_stiff_overdamped_hinge_matches_closed_form():
     T = 0.2
     state = State(0.0, np.array([1.0]), np.zeros(1))
     P = pack(model)
-    assert choose_scheme(P, np.array([1.0, 0.0, 0.0, 0.0])) == "ros34pw2"
+    assert choose_scheme(P, state_vector([1.0], [0.0])) == "ros34pw2"
     r = simulate(model, SimulationSection(t_end=T, method="compiled", rtol=1e-6, atol=1e-9,
                                           samples=41), state)
     assert r.success, r.message
@@ -53,7 +54,7 @@ def test_w_method_local_error_is_fourth_order_with_any_matrix(jacobian):
     matrix is in W (the W-method property); checked on the nonlinear plate."""
     model = plate_on_hinge(gravity=(0.0, 0.0, 9.81))
     P = pack(model)
-    y = np.array([1.0, 0.5, 0.0, 0.0])
+    y = state_vector([1.0], [0.5])
     f = kernels.rhs(P, y, near(P))
     if jacobian == "exact":
         J = kernels.rhs_jacobian(P, y, f, near(P))
@@ -80,7 +81,7 @@ def test_stiff_jacobian_holds_the_stiff_spectrum(closure):
     model = ring_2x2(closure)
     P = pack(model)
     n = P.n
-    y = np.array([-0.01, 1.0, 1.0, 0.5, -0.3, 0.2, 0.0, 0.0])
+    y = state_vector([-0.01, 1.0, 1.0], [0.5, -0.3, 0.2])
     assert hinges.contact_mode(y[0]) == 0
     Jfd = kernels.rhs_jacobian(P, y, kernels.rhs(P, y, near(P)), near(P))[:2 * n, :2 * n]
     A, B, ok = stiff.stiff_jacobian(P, y, near(P))
@@ -95,7 +96,7 @@ def test_stiff_jacobian_holds_the_stiff_spectrum(closure):
 def test_auto_keeps_dopri5_for_a_mild_model():
     model = plate_on_hinge(c=0.02)
     P = pack(model)
-    y0 = np.array([1.0, 0.0, 0.0, 0.0])
+    y0 = state_vector([1.0], [0.0])
     assert 3.3 / stiffness(P, y0) > 2e-4
     r = simulate(model, SimulationSection(t_end=0.05, method="compiled", samples=6),
                  State(0.0, y0[:1], y0[1:2]))

@@ -17,6 +17,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from panel_deploy.build import build_model
 from panel_deploy.cli import main
+from panel_deploy.dynamics.report import contact_energy_error, total_energy
 from panel_deploy.kinematics import forward_kinematics
 from panel_deploy.scene import scene_from_dict
 from panel_deploy.trajectory_io import COLUMNS, FORMAT_VERSION, UNITS, load_trajectory
@@ -67,7 +68,7 @@ def _joint_states(mcap):
 def test_named_columns_are_the_recorded_joint_states_of_the_same_run(run):
     npz, mcap = run
     z = _numpy_only(npz)
-    assert int(z["format_version"]) == FORMAT_VERSION == 4
+    assert int(z["format_version"]) == FORMAT_VERSION == 5
     stamps, names, position, velocity = _joint_states(mcap)
     assert np.array_equal(stamps, np.round(z["t"] * 1e9).astype(np.int64))
     joints, cut = [str(x) for x in z["joint_names"]], [str(x) for x in z["cut_hinge_names"]]
@@ -184,7 +185,7 @@ def _rewrite(src, dst, **changes):
     (lambda z: {"cut_hinge_names": np.array([1.0])}, "cut_hinge_names: expected a 1-d array of text"),
     (lambda z: {"damping": z["damping"][:3]}, "damping has shape (3,); the stored scene's model has 12"),
     (lambda z: {"damping": np.full(12, np.nan)}, "damping[0] = nan: expected a finite number >= 0"),
-    (lambda z: {"format_version": np.array(5)}, "format_version 5, expected one of 2, 3, 4"),
+    (lambda z: {"format_version": np.array(6)}, "format_version 6, expected one of 2, 3, 4, 5"),
     (lambda z: {"contact_onsets": z["contact_onsets"][:, :8]}, "contact_onsets has 8 columns, expected 9"),
     (lambda z: {"contact_onsets": z["contact_onsets"][:-1]}, "contact_onsets has 120 samples, t has 121"),
     (lambda z: {"contact_onsets": np.where(np.arange(9) == 1, np.nan, z["contact_onsets"])},
@@ -209,6 +210,27 @@ def test_a_version_3_file_loads_without_contact_onsets(run, tmp_path):
     stored = load_trajectory(tmp_path / "v3.npz")
     assert stored.version == 3
     assert np.all(stored.result.contact_onsets[:, 2] == -1) and len(stored.result.contact_onsets) == 121
+
+
+def test_a_version_4_file_balances_the_contacts_stored_energy(run, tmp_path):
+    """Before version 5 a file had no record of the work done on the panel
+    contacts' springs: its energy balance counts their stored energy, part of
+    ``spring``, as the code that wrote it did."""
+    npz, _ = run
+    data = _numpy_only(npz)
+    current = load_trajectory(npz).result
+    del data["energy_contact"], data["energy_contact_work"]
+    data["format_version"] = np.array(4)
+    np.savez_compressed(tmp_path / "v4.npz", **data)
+    old = load_trajectory(tmp_path / "v4.npz").result
+    E = old.energy
+    assert "contact_work" not in E
+    expected = E["kinetic"] + E["spring"] + E["gravity"] + E["dissipated"] - E["constraint_work"]
+    assert np.array_equal(total_energy(E), expected)
+    assert contact_energy_error(old) is None
+    # this run's panels never touch at a sample: nothing stored, no work, the same balance
+    assert not np.any(current.energy["contact"]) and not np.any(current.energy["contact_work"])
+    assert np.array_equal(total_energy(current.energy), expected)
 
 
 def test_a_version_3_file_without_its_names_is_refused(run, tmp_path, capsys):

@@ -1,9 +1,15 @@
 """Compiled (numba) kernels of the deployment dynamics: the right-hand side.
 
-State vector ``y`` (shape ``(2 n + 2,)``): ``theta`` (n, rad), ``omega`` (n,
-rad/s), the energy dissipated by all dampers and the air drag since t = 0 (J)
-and the work done on the system by the exact-closure constraint forces (J,
-zero for penalty).
+State vector ``y`` (shape ``(2 n + ACCUMULATORS,)``, :func:`state_vector`):
+``theta`` (n, rad), ``omega`` (n, rad/s), then three integrals since t = 0
+(J): the energy dissipated by all dampers and the air drag, the work done on
+the system by the exact-closure constraint forces (zero for penalty), and the
+work the bodies did on the panel contacts' springs. The last is there because
+a contact law built on the separating axis is not conservative where a pair
+changes the features it touches by (the stored energy jumps, the state does
+not): the energy balance counts that work, not the stored energy, so that it
+checks the integration alone, and the difference says what the law created
+(:func:`panel_deploy.dynamics.report.contact_energy_error`).
 
 Algorithm (Featherstone, "Rigid Body Dynamics Algorithms", ch. 5-7), with all
 spatial vectors in the ground frame about its origin, angular part first
@@ -41,6 +47,15 @@ from .closure import (articulated_closure, cholesky, cholesky_solve, closure_jac
 from .hinges import hinge_law
 from .pack import EXACT, TREE
 from .panel_contact import near_pairs, panel_contacts, take_onsets
+
+#: Integrals after theta and omega in the state vector (see the module docstring).
+ACCUMULATORS = 3
+
+
+def state_vector(theta, omega):
+    """The state vector (2 n + ACCUMULATORS,) of angles theta (n, rad) and rates
+    omega (n, rad/s), its integrals at 0 (the start of a run)."""
+    return np.concatenate([theta, omega, np.zeros(ACCUMULATORS)])
 
 
 @njit(cache=True, **FLOAT_MATH)
@@ -187,8 +202,10 @@ def _bias(P, theta, omega, kin, Jb, hb, near):
     and the panel contacts' candidate list ``near`` (:func:`.panel_contact.near_pairs`).
 
     Returns Q (n,) N m (``M qdd = Q`` for the tree), the velocity-product
-    spatial accelerations (n + 1, 6), and the spring energy, dissipation and
-    gravity energy (J, W: dampers and air drag, J).
+    spatial accelerations (n + 1, 6), the spring energy (J, the panel
+    contacts' included), the panel contacts' part of it (J) and the power
+    their springs take (W), the dissipation (W: dampers and air drag) and the
+    gravity energy (J).
     """
     n = P.n
     R, p, w, vo, S = kin
@@ -225,8 +242,8 @@ def _bias(P, theta, omega, kin, Jb, hb, near):
         sp.put(f, i, sp.add(sp.get(f, i), fw))
         sp.put(f, i, sp.add(sp.get(f, i, 3), fv), 3)
     dissipation += air_drag(P, R, p, w, vo, f)
-    e, pw = panel_contacts(P, R, p, w, vo, f, near)
-    spring += e
+    contact, pw, contact_power = panel_contacts(P, R, p, w, vo, f, near)
+    spring += contact
     dissipation += pw
     Q = np.empty(n)
     for i in range(n - 1, -1, -1):
@@ -238,7 +255,7 @@ def _bias(P, theta, omega, kin, Jb, hb, near):
         if a < n:
             for k in range(6):
                 f[a, k] += f[i, k]
-    return Q, acc, spring, dissipation, gravity_energy
+    return Q, acc, spring, contact, contact_power, dissipation, gravity_energy
 
 
 @njit(cache=True, **FLOAT_MATH)
@@ -252,14 +269,16 @@ def mass_and_bias(P, theta, omega, near):
     Q : (n,) generalised force minus bias, ``M qdd = Q`` for the tree, N m
     kin : tuple (R, p, w, vo, S)
     acc : (n + 1, 6) velocity-product spatial accelerations
-    spring, dissipation, gravity_energy : float  J, W (dampers and air drag), J
+    spring, contact, contact_power, dissipation, gravity_energy : float
+        J (the panel contacts' included), J (theirs), W (taken by their
+        springs), W (dampers and air drag), J
     """
     kin = kinematics(P, theta, omega)
     R, p, _, _, S = kin
     Jb, hb = body_inertias(P, R, p)
     M = mass_matrix(P, S, Jb, hb)
-    Q, acc, spring, dissipation, gravity_energy = _bias(P, theta, omega, kin, Jb, hb, near)
-    return M, Q, kin, acc, spring, dissipation, gravity_energy
+    Q, acc, spring, contact, contact_power, dissipation, gravity_energy = _bias(P, theta, omega, kin, Jb, hb, near)
+    return M, Q, kin, acc, spring, contact, contact_power, dissipation, gravity_energy
 
 
 @njit(cache=True, **FLOAT_MATH)
@@ -273,15 +292,16 @@ def rhs(P, y, near):
     n = P.n
     theta = y[:n]
     omega = y[n:2 * n]
-    dy = np.empty(2 * n + 2)
+    dy = np.empty(2 * n + ACCUMULATORS)
     dy[:n] = omega
     dy[2 * n + 1] = 0.0
     if articulated.applies(P.n):
         kin = kinematics(P, theta, omega)
         R, p, _, _, S = kin
         Jb, hb = body_inertias(P, R, p)
-        Q, acc, _, dissipation, _ = _bias(P, theta, omega, kin, Jb, hb, near)
+        Q, acc, _, _, contact_power, dissipation, _ = _bias(P, theta, omega, kin, Jb, hb, near)
         dy[2 * n] = dissipation
+        dy[2 * n + 2] = contact_power
         U, D, ok = articulated.factor(P, S, articulated.inertias(P, Jb, hb), np.zeros(n))
         if not ok:
             dy[:] = np.nan
@@ -296,8 +316,9 @@ def rhs(P, y, near):
                 dy[:] = np.nan
                 return dy
         return dy
-    M, qdd, kin, acc, _, dissipation, _ = mass_and_bias(P, theta, omega, near)
+    M, qdd, kin, acc, _, _, contact_power, dissipation, _ = mass_and_bias(P, theta, omega, near)
     dy[2 * n] = dissipation
+    dy[2 * n + 2] = contact_power
     L, ok = cholesky(M)
     if not ok:
         dy[:] = np.nan
@@ -317,7 +338,7 @@ def rhs(P, y, near):
 
 @njit(cache=True, **FLOAT_MATH)
 def rhs_jacobian(P, y, f0, near):
-    """Forward-difference Jacobian d rhs / dy, (2n + 2, 2n + 2), given f0 = rhs(P, y, near)."""
+    """Forward-difference Jacobian d rhs / dy, (N, N) for y (N,), given f0 = rhs(P, y, near)."""
     N = y.shape[0]
     Jac = np.zeros((N, N))
     yp = y.copy()
@@ -333,13 +354,14 @@ def rhs_jacobian(P, y, f0, near):
 def observe(P, y):
     """Energies and closure gap at one state.
 
-    Returns kinetic, spring, gravity energy (J), largest gap (m) and the
-    closure Jacobian (5 m, n) for its singular values.
+    Returns kinetic, spring (the panel contacts' included), the panel
+    contacts' and gravity energy (J), largest gap (m) and the closure
+    Jacobian (5 m, n) for its singular values.
     """
     n = P.n
     theta = y[:n]
     omega = y[n:2 * n]
-    M, Q, kin, acc, spring, dissipation, gravity_energy = mass_and_bias(
+    M, Q, kin, acc, spring, contact, _, _, gravity_energy = mass_and_bias(
         P, theta, omega, near_pairs(P))
     kinetic = 0.5 * sp.dot(omega, sp.mv(M, omega))
     R, p, w, vo, S = kin
@@ -349,4 +371,4 @@ def observe(P, y):
         c, J, gamma = closure_jacobian(P, R, p, w, vo, S, np.zeros((0, 6)))
     else:
         J = np.zeros((0, n))
-    return kinetic, spring, gravity_energy, gap, J
+    return kinetic, spring, contact, gravity_energy, gap, J

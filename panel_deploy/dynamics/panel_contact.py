@@ -219,8 +219,8 @@ def pair_points(P, r, R, p, work):
 @njit(cache=True, **FLOAT_MATH)
 def panel_contacts(P, R, p, w, vo, f, near):
     """Subtract the panel-contact wrenches from f (n + 1, 6), the bias wrenches
-    about the ground origin; returns the contact energy (J) and the power its
-    dampers dissipate (W).
+    about the ground origin; returns the contact energy (J), the power its
+    dampers dissipate (W) and the power its springs take from the bodies (W).
 
     Per contact point of a pair of ``P.contact`` (:mod:`panel_deploy.contacts`,
     :func:`panel_deploy.boxes.contact`) at depth d > 0, approaching at s (the
@@ -229,11 +229,14 @@ def panel_contacts(P, R, p, w, vo, f, near):
     bodies, k and c its weight's share of k_p and c_p: a spring and damper that never
     pulls (one that pulled would glue parting panels together), both coming
     in over the first ``CONTACT_RAMP`` of depth (:func:`contact_law`). The
-    spring stores its energy; the rest of the push's work, (push - spring) s
-    >= 0, is dissipated (s is d's rate up to the motion of the point).
+    spring takes the power spring s and stores its energy; the rest of the
+    push's work, (push - spring) s >= 0, is dissipated (s is d's rate up to
+    the motion of the point). The two powers are the push's whole work on
+    the bodies, exactly; the stored energy is a function of the poses that
+    jumps where a pair changes the features it touches by.
     With a friction coefficient mu (``contact[r, 10]``) > 0, the point's
     :func:`_friction` opposes the slip, and dissipates all its work.
-    0, 0 where ``P.contact`` has no rows (no panel contact);
+    0, 0, 0 where ``P.contact`` has no rows (no panel contact);
     ``near`` is the run's candidate list (:func:`near_pairs`), which also
     gets the fastest onset met (its item 8).
 
@@ -251,9 +254,10 @@ def panel_contacts(P, R, p, w, vo, f, near):
     """
     contact = P.contact
     if contact.shape[0] == 0:
-        return 0.0, 0.0
+        return 0.0, 0.0, 0.0
     energy = 0.0
     power = 0.0
+    spring_power = 0.0
     work = box_scratch()
     points, depths, weights = work[-3], work[-2], work[-1]
     onset = near[8]
@@ -274,6 +278,7 @@ def panel_contacts(P, R, p, w, vo, f, near):
             push, spring, e, _, _ = contact_law(depth, speed, weights[q] * contact[r, 8],
                                                  weights[q] * contact[r, 9])
             energy += e
+            spring_power += spring * speed
             power += (push - spring) * speed
             force = sp.scale(normal, push)  # on b, as the friction: f holds minus the force on a
             if mu > 0.0:
@@ -282,7 +287,7 @@ def panel_contacts(P, R, p, w, vo, f, near):
                 power += loss
             sp.add_wrench(f, a, sp.ZERO3, force, x)
             sp.add_wrench(f, b, sp.ZERO3, sp.scale(force, -1.0), x)
-    return energy, power
+    return energy, power, spring_power
 
 
 @njit(cache=True, inline="always", **FLOAT_MATH)

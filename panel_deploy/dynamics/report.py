@@ -65,15 +65,39 @@ def first_time(t, mask):
 
 def total_energy(energy: dict) -> np.ndarray:
     """E_kin + E_spring + E_grav + E_diss - W_constraint at every sample of a
-    result's ``energy``, J: constant in an exact integration."""
-    return (energy["kinetic"] + energy["spring"] + energy["gravity"] + energy["dissipated"]
-            - energy["constraint_work"])
+    result's ``energy``, J: constant in an exact integration. The panel
+    contacts' springs count by the work done on them ("contact_work"), not
+    by the energy they store ("contact", part of "spring"), so the sum checks
+    the integration, not the contact law (:func:`contact_energy_error`);
+    a trajectory file written before that record existed counts the stored
+    energy."""
+    total = (energy["kinetic"] + energy["spring"] + energy["gravity"] + energy["dissipated"]
+             - energy["constraint_work"])
+    if "contact_work" in energy:
+        total = total - energy["contact"] + energy["contact_work"]
+    return total
 
 
 def energy_balance_error(result: SimulationResult) -> np.ndarray:
     """|E_kin + E_spring + E_grav + E_diss - W_constraint - E_0| / E_0 at every sample."""
     total = total_energy(result.energy)
     return np.abs(total - total[0]) / abs(total[0])
+
+
+def contact_energy_error(result: SimulationResult) -> float | None:
+    """Largest energy the panel contacts' law created or lost, relative to the
+    run's start energy: ``|E_contact(t) - E_contact(0) - W_contact(t)| / E_0``
+    over the samples, where W_contact is the work the bodies did on the
+    contacts' springs. Zero for a conservative law; a law built on the
+    separating axis changes its stored energy at once where a pair changes
+    the features it touches by (docs/findings.md 3.2). None without the
+    record (a run without panel contacts, an older file) or where the
+    balance means nothing (:func:`balance_error`)."""
+    energy = result.energy
+    if "contact_work" not in energy or not np.any(energy["contact"]) or balance_error(result) is None:
+        return None
+    created = energy["contact"] - energy["contact"][0] - energy["contact_work"]
+    return float(np.abs(created).max() / abs(total_energy(energy)[0]))
 
 
 def balance_error(result: SimulationResult) -> float | None:
@@ -123,6 +147,7 @@ def dynamics_summary(model: Model, result: SimulationResult, *, flat_tolerance=F
         "release_times": {n: h["released_at"] for n, h in report["hinges"].items()},
         "locked_hinges": report["locked"],
         "energy_balance_error": balance_error(result),
+        "contact_energy_error": contact_energy_error(result),
         "max_constraint_gap": float(result.constraint_gap.max()),
         "min_closure_sigma": (float(result.closure_sigma_min[:, 0].min())
                               if result.closure_sigma_min.shape[1] else None),

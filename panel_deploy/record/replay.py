@@ -56,18 +56,15 @@ def poses(model, thetas):
 def energies(d: RecordedDeployment) -> dict:
     """Kinetic, spring and gravity energy and their sum (J) at every sample;
     only spring and gravity when the recording has no rates."""
-    from ..dynamics.kernels import observe
+    from ..dynamics.kernels import observe, state_vector
     from ..dynamics.pack import pack
 
     P, n = pack(d.model), d.model.n_coords
     has_rates = not isinstance(d.track.omega, list)
     out = {"spring": [], "gravity": []} | ({"kinetic": [], "total": []} if has_rates else {})
     for j, theta in enumerate(d.track.theta):
-        y = np.zeros(2 * n + 2)
-        y[:n] = theta
-        if has_rates:
-            y[n:2 * n] = d.track.omega[j]
-        kinetic, spring, gravity, _, _ = observe(P, y)
+        y = state_vector(theta, d.track.omega[j] if has_rates else np.zeros(n))
+        kinetic, spring, _, gravity, _, _ = observe(P, y)
         out["spring"].append(spring)
         out["gravity"].append(gravity)
         if has_rates:

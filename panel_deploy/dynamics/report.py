@@ -90,11 +90,12 @@ def contact_energy_error(result: SimulationResult) -> float | None:
     over the samples, where W_contact is the work the bodies did on the
     contacts' springs. Zero for a conservative law; a law built on the
     separating axis changes its stored energy at once where a pair changes
-    the features it touches by (docs/findings.md 3.2). None without the
-    record (a run without panel contacts, an older file) or where the
-    balance means nothing (:func:`balance_error`)."""
+    the features it touches by (docs/findings.md 3.2). None where
+    the contacts stored and took nothing at every sample, without the record
+    (an older file) or where the balance means nothing (:func:`balance_error`)."""
     energy = result.energy
-    if "contact_work" not in energy or not np.any(energy["contact"]) or balance_error(result) is None:
+    touched = "contact_work" in energy and (np.any(energy["contact"]) or np.any(energy["contact_work"]))
+    if not touched or balance_error(result) is None:
         return None
     created = energy["contact"] - energy["contact"][0] - energy["contact_work"]
     return float(np.abs(created).max() / abs(total_energy(energy)[0]))

@@ -84,6 +84,13 @@ def energy_balance_error(result: SimulationResult) -> np.ndarray:
     return np.abs(total - total[0]) / abs(total[0])
 
 
+def contact_energy_created(energy: dict, contact_0: float) -> np.ndarray:
+    """The energy the panel contacts' law has created (J, < 0: lost) by every
+    sample of a result's ``energy``: their stored energy less ``contact_0``,
+    its value at the run's start, less the work the bodies did on them."""
+    return energy["contact"] - contact_0 - energy["contact_work"]
+
+
 def contact_energy_error(result: SimulationResult) -> float | None:
     """Largest energy the panel contacts' law created or lost, relative to the
     run's start energy: ``|E_contact(t) - E_contact(0) - W_contact(t)| / E_0``
@@ -97,7 +104,7 @@ def contact_energy_error(result: SimulationResult) -> float | None:
     touched = "contact_work" in energy and (np.any(energy["contact"]) or np.any(energy["contact_work"]))
     if not touched or balance_error(result) is None:
         return None
-    created = energy["contact"] - energy["contact"][0] - energy["contact_work"]
+    created = contact_energy_created(energy, energy["contact"][0])
     return float(np.abs(created).max() / abs(total_energy(energy)[0]))
 
 

@@ -14,7 +14,7 @@ from ..model import Model, State
 from . import closure, kernels
 from .integrate import integrate_blocks
 from .pack import pack
-from .report import total_energy
+from .report import contact_energy_created, total_energy
 from .result import ENERGY_FLOOR, ENERGY_LIMIT, SimulationResult, Status
 
 #: Gap at which a loop closure counts as blown up, as a fraction of the
@@ -172,7 +172,7 @@ def _energy_failure(result: SimulationResult, total, energy_0, contact_0) -> Sim
     if energy_0 is None or abs(energy_0) < ENERGY_FLOOR:
         return None
     drift = np.abs(total - energy_0) / abs(energy_0)
-    created = (result.energy["contact"] - contact_0 - result.energy["contact_work"]) / abs(energy_0)
+    created = contact_energy_created(result.energy, contact_0) / abs(energy_0)
     over = np.flatnonzero((drift > ENERGY_LIMIT) | (np.abs(created) > ENERGY_LIMIT))
     if not len(over):
         return None

@@ -30,7 +30,9 @@ def deployment_text(s: dict) -> str:
         return "never" if x is None else f"{x:.4g}{unit}"
 
     lines = [f"{'ok' if s['success'] else 'FAILED'}: {s['message']}",
-             f"method {s['method']}, closure {s['closure']}, simulated to {s['t_end']:.4g} s "
+             f"method {s['method']}"
+             + ("" if s.get("scheme") in (None, "", s["method"]) else f" ({s['scheme']})")
+             + f", closure {s['closure']}, simulated to {s['t_end']:.4g} s "
              f"in {s['wall_time']:.3g} s wall ({s['nsteps']} steps, {s['nfev']} evaluations)",
              f"first flat (every hinge within {s['flat_tolerance']} rad of 0): "
              f"{fmt(s['time_to_flat'], ' s')}",

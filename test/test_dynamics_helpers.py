@@ -27,6 +27,24 @@ def plate_on_hinge(k=0.1, c=0.0043, gravity=(0.0, 0.0, 0.0), k_s=1000.0, c_s=0.5
     return Model.build(bodies, hinges, 0, k_s=k_s, c_s=c_s, gravity=gravity)
 
 
+def hinge_inertia(model):
+    """The plate's moment of inertia about its hinge axis, kg m^2."""
+    h, body = model.hinges[0], model.bodies[1]
+    r0 = body.flat_position - h.point
+    return h.axis @ (body.inertia + body.mass * (r0 @ r0 * np.eye(3) - np.outer(r0, r0))) @ h.axis
+
+
+def overdamped_plate(root=5e3):
+    """The plate on a linear spring and damper whose roots are ~-root and -10 1/s,
+    and the closed form of theta from theta(0) = 1 at rest, a function of t."""
+    I_h = hinge_inertia(plate_on_hinge())
+    c = root * I_h
+    model = plate_on_hinge(k=10.0 * c, c=c)
+    lam = np.roots([I_h, c, 10.0 * c])
+    a = np.linalg.solve([[1, 1], lam], [1.0, 0.0])
+    return model, lam, lambda t: np.exp(np.outer(t, lam)) @ a
+
+
 def random_branched(seed=0, closure="penalty", gravity=(0.3, -9.81, 1.0)):
     """Six bodies with random geometry and inertia: a branched tree plus one loop."""
     rng = np.random.default_rng(seed)

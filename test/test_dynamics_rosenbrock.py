@@ -3,6 +3,7 @@ overdamped hinge against its closed form, the W-method's order with any matrix,
 the stiff Jacobian against finite differences, the automatic choice, failures."""
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -15,25 +16,13 @@ from panel_deploy.errors import ModelError
 from panel_deploy.model import State
 from panel_deploy.scene import SimulationSection
 
-from test_dynamics_helpers import near, plate_on_hinge, random_branched, ring_2x2
-
-
-def hinge_inertia(model):
-    h, body = model.hinges[0], model.bodies[1]
-    r0 = body.flat_position - h.point
-    return h.axis @ (body.inertia + body.mass * (r0 @ r0 * np.eye(3) - np.outer(r0, r0))) @ h.axis
+from test_dynamics_helpers import near, overdamped_plate, plate_on_hinge, random_branched, ring_2x2
 
 
 def test_stiff_overdamped_hinge_matches_closed_form():
     """I theta'' = -k theta - c theta' with roots -1e5 and -10 1/s (no gravity, no
     contact: exactly linear). DOPRI5 would need >= 1e5 * T / 3.3 steps."""
-    plate = plate_on_hinge()
-    I_h = hinge_inertia(plate)
-    c = 1e5 * I_h
-    k = 10.0 * c
-    model = plate_on_hinge(k=k, c=c)
-    lam = np.roots([I_h, c, k])          # both real, negative
-    a = np.linalg.solve([[1, 1], lam], [1.0, 0.0])
+    model, lam, exact = overdamped_plate(1e5)
     T = 0.2
     state = State(0.0, np.array([1.0]), np.zeros(1))
     P = pack(model)
@@ -42,10 +31,32 @@ def test_stiff_overdamped_hinge_matches_closed_form():
                                           samples=41), state)
     assert r.success, r.message
     assert r.scheme == "ros34pw2"
-    exact = np.exp(np.outer(r.t, lam)) @ a
-    assert np.abs(r.theta[:, 0] - exact).max() < 1e-5
+    assert np.abs(r.theta[:, 0] - exact(r.t)).max() < 1e-5
     explicit_steps = T * np.abs(lam).max() / 3.3
     assert r.nsteps < explicit_steps / 20
+
+
+def test_compiled_hands_over_to_ros34pw2_once_dopri5_is_held_at_its_stability_limit():
+    """Roots -5e3 and -10 1/s: too mild at the start for choose_scheme (3.3 / 5e3 s
+    is above STIFF_STEP), but from the first steps on the slow root alone would let
+    the steps grow far past DOPRI5's stability limit, 3.3 / 5e3 s."""
+    model, lam, exact = overdamped_plate()
+    P = pack(model)
+    y0 = state_vector([1.0], [0.0])
+    assert choose_scheme(P, y0) == "dopri5"
+    T = 1.0
+    explicit_steps = T * np.abs(lam).max() / 3.3
+    settings = SimulationSection(t_end=T, method="dopri5", rtol=1e-6, atol=1e-9, samples=41)
+    state = State(0.0, y0[:1], y0[1:2])
+    held = simulate(model, settings, state)
+    assert held.success and held.scheme == "dopri5" and held.nsteps > 0.9 * explicit_steps
+    r = simulate(model, dataclasses.replace(settings, method="compiled"), state)
+    assert r.success, r.message
+    switch = re.fullmatch(r"dopri5, then ros34pw2 from t = (\S+) s", r.scheme)
+    assert switch and 0.0 < float(switch[1]) < 0.05, r.scheme
+    assert r.nsteps < held.nsteps / 3 and r.njev > 0
+    assert np.abs(r.theta[:, 0] - exact(r.t)).max() < 1e-5
+    assert np.abs(held.theta[:, 0] - exact(held.t)).max() < 1e-5
 
 
 @pytest.mark.parametrize("jacobian", ["exact", "zero"])

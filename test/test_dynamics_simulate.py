@@ -16,7 +16,7 @@ from panel_deploy.kinematics import axis_rotation
 from panel_deploy.model import AirParameters, State
 from panel_deploy.scene import SimulationSection, load_scene, resolve_scene
 
-from test_dynamics_helpers import plate_on_hinge, random_branched
+from test_dynamics_helpers import overdamped_plate, plate_on_hinge, random_branched
 
 
 def plate_reference(model, theta0, t):
@@ -170,7 +170,7 @@ def test_energy_drift_fails_the_run_at_its_first_sample_over_the_limit(method):
     assert 2 <= len(r.t) < 101 and error[-1] > ENERGY_LIMIT and np.all(error[:-1] <= ENERGY_LIMIT)
     assert np.all(np.isfinite(r.theta)) and np.all(np.isfinite(r.position))
     # in blocks: the same samples, the failure in the last block
-    blocks = list(simulate_segments(model, settings, state, segment_samples=3))
+    blocks = list(simulate_segments(model, settings, state, segment_samples=1))
     assert not blocks[-1].success and blocks[-1].status == Status.ENERGY_DRIFT
     assert np.array_equal(np.concatenate([b.theta for b in blocks]), r.theta)
     tight = simulate(model, dataclasses.replace(settings, rtol=1e-8, atol=1e-10), state)
@@ -293,6 +293,19 @@ def test_paper_segments_are_simulate_bit_for_bit(paper, method, scheme, t_end, s
         [block + 1] + [block] * ((last - 1) // block - 1) + [last - (last - 1) // block * block])
     assert all(b.nsteps > 0 for b in blocks)
     assert sum(b.nsteps for b in blocks) == whole.nsteps
+    assert_same_run(blocks, whole)
+
+
+def test_a_run_that_hands_over_is_simulate_bit_for_bit_in_blocks():
+    """The hand-over from DOPRI5 to ROS34PW2 of method compiled (at ~0.017 s here)
+    falls inside the second block; the blocks after it continue on ROS34PW2."""
+    model, _, _ = overdamped_plate()
+    settings = SimulationSection(t_end=0.5, method="compiled", rtol=1e-6, atol=1e-9, samples=51)
+    state = State(0.0, np.array([1.0]), np.zeros(1))
+    whole = simulate(model, settings, state)
+    assert whole.success and whole.scheme.startswith("dopri5, then ros34pw2 from t = ")
+    blocks = list(simulate_segments(model, settings, state, segment_samples=1))
+    assert blocks[0].scheme == "dopri5" and blocks[-1].scheme == whole.scheme
     assert_same_run(blocks, whole)
 
 

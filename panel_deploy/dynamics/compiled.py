@@ -19,6 +19,10 @@ DOPRI5, ROS34PW2 = 0, 1
 SCHEMES = {"dopri5": DOPRI5, "ros34pw2": ROS34PW2}
 #: Key of the ROS34PW2 loop on the O(n) path (where :func:`articulated.applies`).
 ROS34PW2_TERMS = 2
+#: Hairer's DOPRI5 code calls a problem stiff after 15 accepted steps at the
+#: stability limit, and forgets them after 6 below it. Status of a DOPRI5 loop
+#: that found so (``hand_over``).
+STIFF_STEPS, STIFF_RESET, HAND_OVER = 15, 6, 1
 
 
 @njit(cache=True, **FLOAT_MATH)
@@ -33,8 +37,9 @@ def rms_norm(e, y0, y1, rtol, atol):
 
 
 def compiled_loop(scheme):
-    """The compiled loop of one scheme: ``loop(P, t_eval, Y, j, j_stop, carry,
-    counts, rtol, atol, max_step, locate, max_steps, gap_limit)``.
+    """The compiled loop of one scheme: ``loop(P, t_eval, Y, onsets, j, j_stop,
+    carry, counts, rtol, atol, max_step, locate, max_steps, gap_limit,
+    hand_over)``.
 
     One loop per scheme, not one with both: ``implicit`` is a constant of
     each, so numba prunes the other scheme's branches before typing them, and
@@ -63,8 +68,9 @@ def compiled_loop(scheme):
     fill; the call returns after the accepted step that fills sample
     ``j_stop`` (ROS34PW2 may fill several past it in that step), on failure,
     or at t_eval[-1]. ``carry`` (2 + 2N,) float holds t, h, y and f = rhs(y);
-    ``counts`` (7,) int64 holds nfev, njev, nlu, nsteps, nswitches and the
-    landed and rejected flags, all totals over the run. Both are updated in
+    ``counts`` (9,) int64 holds nfev, njev, nlu, nsteps, nswitches, the
+    landed and rejected flags and the two counts of the stiffness test below,
+    all totals over the run. Both are updated in
     place, so the next call (with the returned j) continues exactly as one
     uninterrupted call would; the Jacobian blocks need no carrying, as they
     are stale after an accepted step. A first call passes ``carry`` = (t0, 0,
@@ -72,8 +78,14 @@ def compiled_loop(scheme):
     the starting step are computed. ``max_steps`` bounds the run's total
     nsteps.
 
+    ``hand_over`` (DOPRI5 only): test every accepted step for the stability
+    limit (:func:`.dopri5.stiffness_ratio`) and return with status
+    ``HAND_OVER`` once STIFF_STEPS accepted steps in a row, but for fewer than
+    STIFF_RESET at a time, were at it: the caller goes on with ROS34PW2 from
+    ``carry`` (:func:`integrate_compiled`).
+
     Returns (j, status, code): j the next sample to fill; status 0 ok
-    (j > j_stop, or j == s at the end), -1 failure with code: 1 step
+    (j > j_stop, or j == s at the end), HAND_OVER, -1 failure with code: 1 step
     collapse, 2 non-finite state, 3 gap above gap_limit, 4 max_steps, the
     negated :class:`~panel_deploy.dynamics.result.Status`, or 5, on pace to
     need far more than max_steps (:func:`.integration.off_pace`; status -4 too) (rows of Y
@@ -84,7 +96,7 @@ def compiled_loop(scheme):
 
     @njit(cache=True, **FLOAT_MATH)
     def loop(P, t_eval, Y, onsets, j, j_stop, carry, counts, rtol, atol, max_step,
-             locate, max_steps, gap_limit):
+             locate, max_steps, gap_limit, hand_over):
         N = Y.shape[1]
         n = P.n
         s = t_eval.shape[0]
@@ -100,6 +112,8 @@ def compiled_loop(scheme):
         # the last step was shortened onto a switch: do not locate in the next
         landed = counts[5] != 0
         rejected = counts[6] != 0  # the last attempt was rejected by the error test
+        stiff_steps = counts[7]  # consecutive accepted DOPRI5 steps at the stability limit
+        calm_steps = counts[8]  # accepted steps below it since the last at it
         expo = -1.0 / (rosenbrock.ERROR_ORDER if implicit else 5)
         near = panel_contact.near_pairs(P)
         if nfev == 0:
@@ -141,7 +155,7 @@ def compiled_loop(scheme):
                 nfev += 3
                 nlu += 1
             else:
-                y1, err = dopri5.step(P, y, f, step, K, near)
+                y1, err, y6 = dopri5.step(P, y, f, step, K, near)
                 nfev += 6
             en = rms_norm(err, y, y1, rtol, atol)
             if not math.isfinite(en):
@@ -186,6 +200,18 @@ def compiled_loop(scheme):
                 if integration.off_pace(t_eval[0], t, t_eval[s - 1], nsteps, max_steps):
                     status, code = -1, 5
                     break
+                if not implicit:
+                    if hand_over:
+                        if dopri5.stiffness_ratio(K, y, y6, step, 2 * n) > dopri5.STIFF_RATIO:
+                            stiff_steps += 1
+                            calm_steps = 0
+                        else:
+                            calm_steps += 1
+                            if calm_steps == STIFF_RESET:
+                                stiff_steps = 0
+                        if stiff_steps == STIFF_STEPS:
+                            status = HAND_OVER
+                            break
                 grow = min(10.0, 0.9 * en ** expo) if en > 0 else 10.0
                 # After a rejection do not grow again at once (Hairer & Wanner II.4):
                 # the error estimate just said the step was too long.
@@ -206,6 +232,8 @@ def compiled_loop(scheme):
         counts[4] = nswitches
         counts[5] = 1 if landed else 0
         counts[6] = 1 if rejected else 0
+        counts[7] = stiff_steps
+        counts[8] = calm_steps
         return j, status, code
 
     return loop
@@ -244,15 +272,28 @@ def choose_scheme(P, y0) -> str:
     return "ros34pw2" if stiffness(P, y0) * STIFF_STEP > 3.3 else "dopri5"  # a model without stiffness: 0
 
 
+def _loop_of(scheme, P):
+    """The compiled loop that runs ``scheme`` ("dopri5" or "ros34pw2") on P."""
+    key = SCHEMES[scheme]
+    return COMPILED_LOOPS[ROS34PW2_TERMS if key == ROS34PW2 and articulated.applies(P.n) else key]
+
+
 def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
     """The compiled loop of scheme ``name`` ("dopri5", "ros34pw2", or "compiled":
     :func:`choose_scheme` picks) called once per block of samples (see
-    :func:`integrate_blocks`)."""
+    :func:`integrate_blocks`).
+
+    "compiled" that starts on DOPRI5 hands over to ROS34PW2 for the rest of
+    the run once DOPRI5's steps are held at its stability limit (the loop's
+    ``hand_over``), as LSODA does: a heavily damped array that has come near
+    flat, its hinges on their stops, is stiff where its start was not. The
+    run's ``scheme`` then says when it handed over. One way only: the
+    lightly damped deployments whose steps are set by accuracy never reach
+    the limit (docs/findings.md 5).
+    """
     scheme = choose_scheme(P, y0) if name == "compiled" else name
-    key = SCHEMES[scheme]
-    if key == ROS34PW2 and articulated.applies(P.n):
-        key = ROS34PW2_TERMS
-    loop = COMPILED_LOOPS[key]
+    hand_over = name == "compiled" and scheme == "dopri5"
+    loop = _loop_of(scheme, P)
     s, N = len(t_eval), len(y0)
     Y = np.full((s, N), np.nan)
     Y[0] = y0
@@ -260,18 +301,23 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
     carry = np.zeros(2 + 2 * N)
     carry[0] = t_eval[0]
     carry[2:2 + N] = y0
-    counts = np.zeros(7, dtype=np.int64)
+    counts = np.zeros(9, dtype=np.int64)
     before = integration.Counters()
     j, lo, done = 1, 0, 0
     for stop in stops:
         status = code = 0
-        if j <= stop:  # else ROS34PW2 filled this block already
+        while j <= stop:  # else ROS34PW2 filled this block already
             try:
                 j, status, code = loop(
                     P, t_eval, Y, onsets, j, int(stop), carry, counts, settings.rtol,
-                    settings.atol, settings.max_step, switches.locates(P, settings), max_steps, gap_limit)
+                    settings.atol, settings.max_step, switches.locates(P, settings), max_steps,
+                    gap_limit, hand_over)
             except ZeroDivisionError:  # 1/0 in boxes.py, on numba's error model (the dynamics: inf)
                 status, code = -1, -Status.NON_FINITE
+            if status != HAND_OVER:
+                break
+            status, hand_over, loop = 0, False, _loop_of("ros34pw2", P)
+            scheme = f"dopri5, then ros34pw2 from t = {carry[0]:.6g} s"
         message = integration.FAILURES.get(code, "")
         status = Status(-min(code, 4) if status else 0)
         done = integration.leading_finite(Y, done, j)

@@ -24,8 +24,10 @@ E = np.array([71 / 57600, 0.0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525
 
 @njit(cache=True, **FLOAT_MATH)
 def step(P, y, f, h, K, near):
-    """One Dormand-Prince step of length h; returns (y1, err) and leaves rhs(y1) in K[6]
-    (``near``: the run's candidate list, :func:`panel_contact.near_pairs`)."""
+    """One Dormand-Prince step of length h; returns (y1, err, y6) and leaves
+    rhs(y1) in K[6] and rhs(y6) in K[5]; y6 is the sixth stage's state, at
+    the step's end like y1, for :func:`stiffness_ratio` (``near``: the run's
+    candidate list, :func:`panel_contact.near_pairs`)."""
     N = y.shape[0]
     K[0] = f
     yi = np.empty(N)
@@ -49,4 +51,24 @@ def step(P, y, f, h, K, near):
         for q in range(7):
             s += h * E[q] * K[q, i]
         err[i] = s
-    return y1, err
+    return y1, err, yi
+
+
+#: Hairer's test for a DOPRI5 step at its stability limit: h |lambda| above
+#: this (the stability region's edge on the negative real axis is at ~3.3).
+STIFF_RATIO = 3.25
+
+
+@njit(cache=True, **FLOAT_MATH)
+def stiffness_ratio(K, y1, y6, h, m):
+    """h |lambda| of the step just taken, estimated from its two evaluations
+    at the step's end (Hairer & Wanner, Solving ODEs II, IV.2, and their
+    DOPRI5 code): h ||f(y1) - f(y6)|| / ||y1 - y6|| over the first m
+    components (the angles and rates: the energy integrals after them feed
+    nothing back); 0 where y1 and y6 agree."""
+    num = 0.0
+    den = 0.0
+    for i in range(m):
+        num += (K[6, i] - K[5, i]) ** 2
+        den += (y1[i] - y6[i]) ** 2
+    return h * (num / den) ** 0.5 if den > 0.0 else 0.0

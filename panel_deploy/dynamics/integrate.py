@@ -113,5 +113,6 @@ METHODS = {m.name: m for m in (
     _compiled("dopri5", "explicit Dormand-Prince 5(4) in a loop compiled whole with numba"),
     _compiled("ros34pw2", "linearly implicit Rosenbrock-W ROS34PW2, compiled, for the stiff "
                           "penalty and contact terms"),
-    _compiled("compiled", "dopri5 or ros34pw2, whichever suits the start state (choose_scheme)"),
+    _compiled("compiled", "dopri5 or ros34pw2, whichever suits the start state (choose_scheme); "
+                          "dopri5 hands over to ros34pw2 once held at its stability limit"),
 )}

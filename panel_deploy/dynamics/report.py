@@ -149,7 +149,7 @@ def dynamics_summary(model: Model, result: SimulationResult, *, flat_tolerance=F
     report = hinge_release_report(model, result, flat_tolerance=flat_tolerance)
     return {
         "success": bool(result.success), "message": result.message, "method": result.method,
-        "t_end": float(result.t[-1]), "time_to_flat": report["flat_at"],
+        "scheme": result.scheme, "t_end": float(result.t[-1]), "time_to_flat": report["flat_at"],
         "flat_tolerance": flat_tolerance,
         "final_angles": dict(zip(names, map(float, theta[-1]))),
         "release_times": {n: h["released_at"] for n, h in report["hinges"].items()},

@@ -95,7 +95,8 @@ def simulate_segments(model: Model, settings, state: State | None = None, *,
     ----------
     model, settings, state, max_steps, gap_limit
         As for :func:`simulate`; ``max_steps`` is the budget of the whole run,
-        and "compiled" picks its scheme once, at the start state.
+        and "compiled" picks its scheme at the start state (handing over from
+        DOPRI5 to ROS34PW2 at most once, inside a block).
     segment_samples : int, optional
         Samples per block (the first block also holds the start sample);
         default all of them in one block.

@@ -122,6 +122,19 @@ def test_local_search_finds_the_known_optimum():
     np.testing.assert_allclose(res.c, 0.043 * res.k)
 
 
+@pytest.mark.parametrize("beta, bounds", [(3.0, (0.043, 3.0)), (0.3, (0.3, 1.0))])
+def test_a_damping_ratio_on_a_bound_is_inside_it(beta, bounds):
+    """c = (c/k) k rounds: 0.1 * 3.0 / 0.1 is 3.0000000000000004, which once made
+    the search refuse the array_10x10 scene's own c/k as outside [0.043, 3]."""
+    model = chain_model(beta=beta)
+    problem = StiffnessProblem.from_model(model, (0.001, 0.2), 0.1, damping_bounds=bounds)
+    lo, hi = problem.x_bounds[-1]
+    assert lo <= problem.x0[-1] <= hi and problem.x0[-1] == pytest.approx(np.log10(beta), abs=1e-12)
+    with pytest.raises(OptimisationError, match="^damping_ratio_bounds: the search starts from"):
+        StiffnessProblem.from_model(model, (0.001, 0.2), 0.1,
+                                    damping_bounds=(bounds[0] / 2, beta * (1 - 1e-9)))
+
+
 def test_groups_share_one_stiffness():
     res = optimise(chain_model(), scene(), workers=1, evaluation=bowl_outcome,
                    groups=[["h0", "h2"]])

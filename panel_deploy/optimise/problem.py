@@ -89,6 +89,11 @@ class StiffnessProblem:
         if damping_bounds is not None:
             damping_bounds = _check_bounds(damping_bounds, "damping_ratio_bounds", "s")
             beta0 = float(np.median(ratio))
+            # The model holds c = (c/k) k, and c / k gives back c/k only to
+            # rounding: a scene's c/k on a bound (checked there) comes back an
+            # ulp past it.
+            if np.isclose(beta0, damping_bounds, rtol=1e-12, atol=0.0).any():
+                beta0 = float(np.clip(beta0, *damping_bounds))
             if not damping_bounds[0] <= beta0 <= damping_bounds[1]:
                 raise OptimisationError(
                     f"damping_ratio_bounds: the search starts from the hinges' c/k = {beta0:g} s "
@@ -115,8 +120,11 @@ class StiffnessProblem:
 
     @property
     def x0(self) -> np.ndarray:
-        """The start point: log10 of K_0 per group (and of the start c/k)."""
-        return self.x_of(self.k0, self.ratio[0] * self.k0)
+        """The start point: log10 of K_0 per group (and of the start c/k),
+        within :attr:`x_bounds` (c/k comes back from c = (c/k) k to rounding,
+        and log10 of an array may round apart from log10 of a number)."""
+        lo, hi = np.array(self.x_bounds).T
+        return np.clip(self.x_of(self.k0, self.ratio[0] * self.k0), lo, hi)
 
     @property
     def x_bounds(self) -> list:

@@ -49,6 +49,12 @@ the ratio to the ramped run and how far the first collision moves; and once
 over ``LONG_WINDOW`` (1 s): wall time per simulated second, steps, and the
 steps per simulated second after the short window against those within it.
 
+Then the shipped 10 x 10 design (``DESIGN``, heavily damped: c/k 3 s) over its
+whole deployment at the scene's tolerances, once on DOPRI5 alone and once as
+``compiled``, which hands over to ROS34PW2 where DOPRI5 is held at its
+stability limit: wall time, steps, when it handed over, the first flat
+sample of each and the largest angle between the two runs.
+
 Then the exponent of each figure against n, the number of bodies, by least
 squares on log-log over the five scenes, and whether issue 33's goals are met
 (``GOAL_EXPONENT``, ``GOAL_LARGEST``). Everything printed is also written to
@@ -70,10 +76,12 @@ from panel_deploy import fold
 from panel_deploy.build import build_model
 from panel_deploy.collision import CollisionSettings, TrajectoryCheck, check_trajectory
 from panel_deploy.dynamics import simulate
+from panel_deploy.dynamics.report import dynamics_summary
 from panel_deploy.scene import load_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENE = ROOT / "config" / "scenes" / "paper_4x4.yaml"
+DESIGN = ROOT / "config" / "scenes" / "array_10x10.yaml"
 #: (rows, cols, simulated window in s); None: the paper scene as it is.
 CASES = ((None, None, 0.5), (5, 6, 0.2), (6, 6, 0.2), (8, 8, 0.2), (10, 10, 0.2))
 SAMPLE_INTERVAL = 0.005
@@ -95,6 +103,22 @@ LONG_WINDOW = 1.0
 #: overshoot measured on the paper scene at its k_s (0.6 mrad at 1000 N m/rad;
 #: 0.2 at 5000), and 10 um at a 0.1 m panel's edge, the depth of the panel contacts' ramp.
 STOP_RAMP = 1e-4
+
+
+def design_runs():
+    """The heavily damped 10 x 10 design over its deployment, on DOPRI5 alone
+    and as ``compiled`` (the hand-over): lines of text."""
+    scene = load_scene(DESIGN)
+    model = build_model(scene)
+    runs = {m: simulate(model, replace(scene.simulation, method=m)) for m in ("dopri5", "compiled")}
+    flat = {m: dynamics_summary(model, r, flat_tolerance=scene.simulation.flat_tolerance)["time_to_flat"]
+            for m, r in runs.items()}
+    a, b = runs["dopri5"], runs["compiled"]
+    lines = [f"  {m:8s} {r.wall_time:6.1f} s wall, {r.nsteps:7d} steps, {r.scheme}, "
+             f"flat at {flat[m]} s, {r.message}" for m, r in runs.items()]
+    return lines + [f"  compiled / dopri5: {b.wall_time / a.wall_time:.2f}x the wall time, "
+                    f"{b.nsteps / a.nsteps:.2f}x the steps; largest angle between the two runs "
+                    f"{np.abs(a.theta - b.theta).max():.2g} rad"]
 
 
 def first_packing(rows: int, cols: int) -> int:
@@ -307,6 +331,8 @@ def main(argv=None):
             lines.append(f"  {x['label']:22s} {r.wall_time / r.t[-1]:6.2f} s/s, {r.nsteps} steps, "
                          f"{(r.nsteps - x['steps']) / later / (x['steps'] / x['t_end']):.2f}x; "
                          f"{r.message}")
+    lines += ["", f"the 10 x 10 design ({DESIGN.name}) over its deployment, "
+              "at the scene's tolerances, one run each:", *design_runs()]
     lines += ["", "before / after, median of the per-sample ratios: "
               + ", ".join(f"{x['label']} {x['ratio']:.2f}" for x in rows),
               "speed bound only / after (the second-order bound), median of the per-sample ratios, "

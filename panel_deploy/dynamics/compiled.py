@@ -80,9 +80,9 @@ def compiled_loop(scheme):
 
     ``hand_over`` (DOPRI5 only): test every accepted step for the stability
     limit (:func:`.dopri5.stiffness_ratio`) and return with status
-    ``HAND_OVER`` once STIFF_STEPS accepted steps in a row, but for fewer than
-    STIFF_RESET at a time, were at it: the caller goes on with ROS34PW2 from
-    ``carry`` (:func:`integrate_compiled`).
+    ``HAND_OVER`` once STIFF_STEPS accepted steps have been at it, with never
+    STIFF_RESET in a row below it in between: the caller goes on with
+    ROS34PW2 from ``carry`` (:func:`integrate_compiled`).
 
     Returns (j, status, code): j the next sample to fill; status 0 ok
     (j > j_stop, or j == s at the end), HAND_OVER, -1 failure with code: 1 step

@@ -170,7 +170,7 @@ def test_energy_drift_fails_the_run_at_its_first_sample_over_the_limit(method):
     assert 2 <= len(r.t) < 101 and error[-1] > ENERGY_LIMIT and np.all(error[:-1] <= ENERGY_LIMIT)
     assert np.all(np.isfinite(r.theta)) and np.all(np.isfinite(r.position))
     # in blocks: the same samples, the failure in the last block
-    blocks = list(simulate_segments(model, settings, state, segment_samples=1))
+    blocks = list(simulate_segments(model, settings, state, segment_samples=3))
     assert not blocks[-1].success and blocks[-1].status == Status.ENERGY_DRIFT
     assert np.array_equal(np.concatenate([b.theta for b in blocks]), r.theta)
     tight = simulate(model, dataclasses.replace(settings, rtol=1e-8, atol=1e-10), state)

@@ -23,6 +23,16 @@ def test_a_collision_before_flat_or_without_flat_is_not():
         assert line.startswith("first collision at 0.8358 s between A and B")
 
 
+def test_the_scheme_is_named_where_it_is_not_the_method():
+    s = summary(None, 0.5)
+    for scheme, line in ((None, "method compiled, closure penalty"),   # older recordings
+                         ("compiled", "method compiled, closure penalty"),
+                         ("dopri5, then ros34pw2 from t = 0.0707 s",
+                          "method compiled (dopri5, then ros34pw2 from t = 0.0707 s), closure penalty")):
+        s["scheme"] = scheme
+        assert deployment_text(s).splitlines()[1].startswith(line + ", simulated to 2 s")
+
+
 def test_energy_balance_is_flagged_when_large_and_withheld_when_meaningless():
     s = summary(None, 0.5)
     for error, shown in ((1e-6, "energy balance error 1.00e-06 (relative);"),

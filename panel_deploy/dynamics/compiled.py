@@ -285,11 +285,12 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
 
     "compiled" that starts on DOPRI5 hands over to ROS34PW2 for the rest of
     the run once DOPRI5's steps are held at its stability limit (the loop's
-    ``hand_over``), as LSODA does: a heavily damped array that has come near
-    flat, its hinges on their stops, is stiff where its start was not. The
-    run's ``scheme`` then says when it handed over. One way only: the
-    lightly damped deployments whose steps are set by accuracy never reach
-    the limit (docs/findings.md 5).
+    ``hand_over``), as LSODA does: choose_scheme judges the start state
+    alone, and a heavily damped array turns stiff soon after it (10 x 10 at
+    c/k 3 s within 0.1 s) or once its hinges come onto their stops (8 x 8 at
+    c/k 2 s at 3.75 s). The run's ``scheme`` then says when it handed over.
+    One way only: the lightly damped deployments whose steps are set by
+    accuracy never reach the limit (docs/findings.md 5).
     """
     scheme = choose_scheme(P, y0) if name == "compiled" else name
     hand_over = name == "compiled" and scheme == "dopri5"

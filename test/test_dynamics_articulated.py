@@ -75,9 +75,10 @@ def test_factor_solve_and_product_are_the_dense_ones(model):
     rng = np.random.default_rng(2)
     for y in states(model, 3):
         M, _, (R, p, _, _, S), *_ = kernels.mass_and_bias(P, y[:n], y[n:2 * n], near(P))
-        I6 = articulated.inertias(P, *kernels.body_inertias(P, R, p))
+        Jb, hb = kernels.body_inertias(P, R, p)
+        I6 = articulated.inertias(P, Jb, hb)
         arm = rng.uniform(0.0, 2.0, n) * np.diag(M)
-        U, D, ok = articulated.factor(P, S, I6, arm)
+        U, D, ok = articulated.factor(P, S, Jb, hb, arm)
         assert ok
         tau = rng.normal(size=n)
         x = np.empty(n)
@@ -106,7 +107,7 @@ def test_the_up_pass_gives_the_quadratic_forms_of_the_inverse(model):
     rng = np.random.default_rng(4)
     y = next(states(model, 1))
     M, _, (R, p, _, _, S), *_ = kernels.mass_and_bias(P, y[:n], y[n:2 * n], near(P))
-    U, D, ok = articulated.factor(P, S, articulated.inertias(P, *kernels.body_inertias(P, R, p)), np.zeros(n))
+    U, D, ok = articulated.factor(P, S, *kernels.body_inertias(P, R, p), np.zeros(n))
     assert ok
     T = rng.normal(size=(4, n))
     E = np.empty_like(T)
@@ -131,13 +132,12 @@ def test_w_solve_is_the_dense_solve(model, rows_per_coordinate):
     y = next(states(model, 1))
     M, _, (R, p, _, _, S), *_ = kernels.mass_and_bias(P, y[:n], y[n:2 * n], near(P))
     Jb, hb = kernels.body_inertias(P, R, p)
-    I6 = articulated.inertias(P, Jb, hb)
     r = int(rows_per_coordinate * n)
     U = rng.normal(size=(r, n)) * (rng.uniform(size=(r, n)) < 0.3)
     Kd, Cd = rng.uniform(0, 100, n), rng.uniform(0, 1, n)
     kk, cc = rng.uniform(0, 1e4, r), rng.uniform(0, 10, r)
     hg = 1e-3
-    factor = rosenbrock._w_factor(P, hg, S, I6, Jb, hb, Kd, Cd, U, kk, cc)
+    factor = rosenbrock._w_factor(P, hg, S, Jb, hb, Kd, Cd, U, kk, cc)
     assert factor[-2] == (r > rosenbrock.DENSE_ROWS * n) and factor[-1]
     g = rng.normal(size=n)
     v = np.empty(n)

@@ -302,7 +302,7 @@ def rhs(P, y, near):
         Q, acc, _, _, contact_power, dissipation, _ = _bias(P, theta, omega, kin, Jb, hb, near)
         dy[2 * n] = dissipation
         dy[2 * n + 2] = contact_power
-        U, D, ok = articulated.factor(P, S, articulated.inertias(P, Jb, hb), np.zeros(n))
+        U, D, ok = articulated.factor(P, S, Jb, hb, np.zeros(n))
         if not ok:
             dy[:] = np.nan
             return dy

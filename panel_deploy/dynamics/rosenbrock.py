@@ -160,7 +160,7 @@ DENSE_ROWS = 0.5
 
 
 @njit(cache=True, **FLOAT_MATH)
-def _w_factor(P, hg, S, I6, Jb, hb, Kd, Cd, U, kk, cc):
+def _w_factor(P, hg, S, Jb, hb, Kd, Cd, U, kk, cc):
     """Factor ``M W = H + U^T diag(wq) U`` with ``H = M + diag(hg Cd + hg^2 Kd)``
     and ``wq = hg cc + hg^2 kk``.
 
@@ -182,7 +182,7 @@ def _w_factor(P, hg, S, I6, Jb, hb, Kd, Cd, U, kk, cc):
     if r > DENSE_ROWS * n:
         LU, piv, ok = _w_dense(P, arm, S, Jb, hb, U, wq)
         return np.empty((0, 6)), np.empty(0), np.empty((0, n)), wq, LU, piv, True, ok
-    UA, D, ok = articulated.factor(P, S, I6, arm)
+    UA, D, ok = articulated.factor(P, S, Jb, hb, arm)
     Z = np.empty((r, n))
     cap = np.zeros((r, r))
     if not ok:
@@ -357,7 +357,7 @@ def step_terms(P, y, f, h, jac, K, near):
     n = P.n
     N = y.shape[0]
     hg = h * GAMMA
-    factor = _w_factor(P, hg, S, I6, Jb, hb, Kd, Cd, U, kk, cc)
+    factor = _w_factor(P, hg, S, Jb, hb, Kd, Cd, U, kk, cc)
     if not factor[-1]:
         return y.copy(), np.full(N, np.inf), False
     yi = np.empty(N)

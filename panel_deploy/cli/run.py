@@ -8,7 +8,9 @@ from .args import scene_of
 
 def run_command(args) -> int:
     """Deploy the scene live through the node graph (optimising first with
-    ``--optimise``); the exit code is the deployment's, as ``simulate``'s."""
+    ``--optimise``). Exit 0 when the deployment reached flat with no collision
+    before it by the collision monitor's verdict (:func:`..nodes.graph.run_graph`), 1 if
+    not: unlike ``simulate``, whose exit code says only whether the run succeeded."""
     from ..nodes import load
     if not args.rate > 0:
         raise SceneError("--rate", f"expected a rate > 0 Hz, got {args.rate}")

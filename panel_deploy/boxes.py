@@ -29,9 +29,11 @@ FEATURE = 0.1
 #: panels meeting edge on near flat (8 x 8, issue 33) went from 0.2 N to 14 N
 #: within 1e-9 rad, and the integrator stalled on the jump at steps of 1e-8 s.
 #: With the outline exact a corner joins where an edge crossing already stood.
-#: Points still merge within the FEATURE band: near-coplanar faces have
-#: clusters of corners and crossings microns apart, which must press once, not
-#: two to eight times by turns as the separating axis flips between the faces.
+#: Points closer than this to one found before are that one. Points within
+#: the FEATURE band of one found before press with a part of a point's share
+#: (:func:`_add_point`): near-coplanar faces have clusters of corners and
+#: crossings microns apart, which must press about once, not two to eight
+#: times by turns as the separating axis flips between the faces.
 COINCIDENT = 1e-9
 
 
@@ -245,31 +247,39 @@ def _height(P, m, x, y):
 
 
 @njit(cache=True)
-def _add_point(out, count, x, y, tol):
-    """Append (x, y) to out[:count] unless a point there is within tol of it
-    (a corner on the other's edge is also a crossing) or out is full; the new count."""
+def _add_point(out, count, x, y, band):
+    """Append the point (x, y) to out[:count] and return the new count; its
+    part of a point's share in out[count, 2]: 3 u^2 - 2 u^3 (a smoothstep),
+    u its distance (the larger of |dx| and |dy|, m) to the nearest point
+    there over ``band`` (m), 1 from ``band`` on. A point within COINCIDENT of
+    one there, or past out's end, is left out. Two points that part press as
+    one at first and as two once ``band`` apart, with no jump between: a
+    point left out until ``band`` apart joined with its whole share at once,
+    and the integrator shrank its steps onto each such jump (issue 33)."""
+    nearest = np.inf
     for k in range(count):
-        if abs(out[k, 0] - x) <= tol and abs(out[k, 1] - y) <= tol:
-            return count
-    if count == out.shape[0]:
+        nearest = min(nearest, max(abs(out[k, 0] - x), abs(out[k, 1] - y)))
+    if nearest <= COINCIDENT or count == out.shape[0]:
         return count
-    out[count, 0], out[count, 1] = x, y
+    u = min(1.0, nearest / band)
+    out[count, 0], out[count, 1], out[count, 2] = x, y, u * u * (3.0 - 2.0 * u)
     return count + 1
 
 
 @njit(cache=True)
-def _overlap_corners(A, ma, B, mb, on, merge, out):
+def _overlap_corners(A, ma, B, mb, on, band, out):
     """Corners of the intersection of the convex hulls of A[:ma] and B[:mb]
-    (2-d, their first two columns), written to out; returns their number:
-    each one's points inside the other (or within ``on`` of its outline) and
-    their edges' crossings, a point within ``merge`` of one found before
-    being that one (m). Without any, the one point half way between the two
+    (2-d, their first two columns), written to out (its first two columns,
+    and in its third each one's part of a point's share, by
+    :func:`_add_point` over ``band``, m); returns their number: each one's
+    points inside the other (or within ``on`` of its outline, m) and their
+    edges' crossings. Without any, the one point half way between the two
     hulls' means."""
     count = 0
     for P, mp, Q, mq in ((A, ma, B, mb), (B, mb, A, ma)):
         for k in range(mp):
             if _covers(Q, mq, P[k, 0], P[k, 1], on):
-                count = _add_point(out, count, P[k, 0], P[k, 1], merge)
+                count = _add_point(out, count, P[k, 0], P[k, 1], band)
     ea = 0 if ma == 1 else (1 if ma == 2 else ma)
     eb = 0 if mb == 1 else (1 if mb == 2 else mb)
     for i in range(ea):
@@ -284,9 +294,10 @@ def _overlap_corners(A, ma, B, mb, on, merge, out):
             s = ((qx - px) * wy - (qy - py) * wx) / denom
             u = ((qx - px) * ry - (qy - py) * rx) / denom
             if 0.0 <= s <= 1.0 and 0.0 <= u <= 1.0:
-                count = _add_point(out, count, px + s * rx, py + s * ry, merge)
+                count = _add_point(out, count, px + s * rx, py + s * ry, band)
     if count == 0:
         out[0, 0] = out[0, 1] = 0.0
+        out[0, 2] = 1.0
         for P, mp in ((A, ma), (B, mb)):
             for k in range(mp):
                 out[0, 0] += 0.5 * P[k, 0] / mp
@@ -482,7 +493,7 @@ def scratch():
     the contact points, their depths and their weights are left in its last
     three arrays."""
     return (np.empty((8, 3)), np.empty((8, 3)), np.empty((8, 3)), np.empty((8, 3)),
-            np.empty((8, 3)), np.empty((8, 3)), np.empty(8), np.empty((MAX_POINTS, 2)),
+            np.empty((8, 3)), np.empty((8, 3)), np.empty(8), np.empty((MAX_POINTS, 3)),
             np.empty((MAX_POINTS, 2)), np.empty((MAX_POINTS, 2)),
             np.empty((MAX_POINTS, 3)), np.empty(MAX_POINTS), np.empty(MAX_POINTS))
 
@@ -502,7 +513,8 @@ def contact(Ra, ca, ha, Rb, cb, hb, work, pressure=False):
     way between the two.
 
     Each point has a weight, its share of the pair's stiffness and damping:
-    1 / FACE_POINTS at a corner. With ``pressure`` the two boxes' faces that
+    1 / FACE_POINTS at a corner, less within the FEATURE band of a point
+    found before (:func:`_add_point`). With ``pressure`` the two boxes' faces that
     face each other push instead, whole, whatever the features, by a
     pressure in proportion to the depth over their overlap, along the
     bisector of their normals (:func:`_face_pressure`, which returns that
@@ -550,6 +562,6 @@ def contact(Ra, ca, ha, Rb, cb, hb, work, pressure=False):
         for m in range(3):
             points[count, m] = x * e1[m] + y * e2[m] + z * n[m]
         depths[count] = top - bottom
-        weights[count] = 1.0 / FACE_POINTS
+        weights[count] = corners2[q, 2] / FACE_POINTS
         count += 1
     return count, n

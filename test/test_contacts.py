@@ -50,6 +50,15 @@ def pressed_of(Ra, ca, ha, Rb, cb, hb):
     return np.array(normal), work[-3][:count].copy(), work[-2][:count].copy(), work[-1][:count].copy()
 
 
+def pushed(Ra, ca, ha, Rb, cb, hb, k, pressure=False):
+    """The push (N) of :func:`contact`'s points at rest, k (N/m) the pair's
+    stiffness shared out by the points' weights."""
+    work = scratch()
+    count, _ = contact(Ra, np.asarray(ca, float), ha, Rb, np.asarray(cb, float), hb, work, pressure)
+    return sum(panel_contact.contact_law(d, 0.0, w * k, 0.0)[0]
+               for d, w in zip(work[-2][:count], work[-1][:count]))
+
+
 def overlap_area(Ra, ca, Rb, cb):
     """Area (m^2) and centroid (x, y) of the overlap of the top face of a and
     the bottom face of b (both HALF, faces along z), by scipy's half-space
@@ -114,30 +123,27 @@ def test_a_tilted_face_pushes_the_pressure_integral_and_its_moment():
     assert (weights * depths * points[:, 0]).sum() * face == pytest.approx(moment, rel=1e-5)
 
 
-def test_a_pressure_over_the_overlap_is_continuous_as_corners_cross():
+def test_the_push_is_continuous_as_corners_cross():
     """b on a, aside and turning about the normal through the turns where
-    its corners cross a's edges: with the corners' springs the push jumps
-    there (by k_p / 4 d per corner, whatever the spacing); the pressure's
-    largest change between neighbouring turns shrinks with the spacing."""
+    its corners cross a's edges: under either law the largest change of the
+    push between neighbouring turns shrinks with the spacing. With the
+    corners' springs a corner comes in where two edge crossings stand, and
+    the crossings press with a part of a point's share that grows as they
+    part (:func:`boxes._add_point`); a crossing left out until a FEATURE
+    band away joined with its whole share, and the push jumped by k_p / 4 d
+    at any spacing."""
     depth, k = 1e-4, 1e7
     cb = np.array([0.03, 0.02, 2 * HALF[2] - depth])
 
     def push(turn, pressure):
         Rb = Rotation.from_rotvec([0, 0, turn]).as_matrix()
-        if pressure:
-            _, _, depths, weights = pressed_of(np.eye(3), (0, 0, 0), HALF, Rb, cb, HALF)
-        else:
-            _, _, _, depths = points_of(np.eye(3), (0, 0, 0), HALF, Rb, cb, HALF)
-            weights = np.full(len(depths), 1 / FACE_POINTS)
-        return sum(panel_contact.contact_law(d, 0.0, w * k, 0.0)[0] for d, w in zip(depths, weights))
+        return pushed(np.eye(3), (0, 0, 0), HALF, Rb, cb, HALF, k, pressure)
 
     for pressure in (False, True):
         steps = [np.abs(np.diff([push(t, pressure) for t in np.linspace(-0.4, 0.4, m)])).max()
                  for m in (801, 8001)]
-        if pressure:
-            assert steps[1] < 0.2 * steps[0], steps
-        else:
-            assert steps[1] > 0.5 * k * depth / FACE_POINTS, steps  # a corner's push, at any spacing
+        assert steps[1] < 0.2 * steps[0], (pressure, steps)
+        assert steps[0] < 0.6 * k * depth / FACE_POINTS, (pressure, steps)  # below a corner's push
 
 
 def test_faces_pressed_flat_touch_at_the_corners_of_their_overlap():
@@ -200,12 +206,11 @@ def test_panels_meeting_edge_on_push_continuously_as_they_turn():
     Ra = Rotation.from_rotvec([0.01011705, -0.35859632, 0.00735598]).as_matrix()
     Rb = Rotation.from_rotvec([0.03488547, -0.32875286, 0.01069572]).as_matrix()
     ca, cb = np.array([-0.05971655, -0.34869838, 0.09653546]), np.array([0.03581818, -0.34817739, 0.12648123])
-    k = 2.5e6  # N/m, a point's share of the scene's k_p
+    k = 1e7  # N/m, the scene's k_p
 
     def push(turn, axis):
         R = Rotation.from_rotvec(np.multiply(axis, turn)).as_matrix() @ Rb
-        count, _, _, depths = points_of(Ra, ca, HALF, R, cb, HALF)
-        return sum(panel_contact.contact_law(d, 0.0, k, 0.0)[0] for d in depths)
+        return pushed(Ra, ca, HALF, R, cb, HALF, k)
 
     for axis in ([0, 1, 0], [1, 0, 0], [0, 0, 1]):
         steps = [np.abs(np.diff([push(t, axis) for t in np.linspace(-3e-3, 3e-3, m)])).max()
@@ -218,9 +223,11 @@ def test_near_coplanar_side_faces_press_once_whichever_face_the_axis_takes():
     """Two neighbours' side faces pressing 0.14 um near flat (8 x 8, issue 33; the
     poses from the run): four separating axes tie (each face's normal and two edge
     products), and the one taken flips under 1e-9 rad turns. The corners and
-    crossings microns apart must merge into the same points whichever it is: merged
-    only when coincident to 1 nm, they pressed two to six times by turns, the push
-    jumping 2.5x, and the integrator stalled there (t = 13.85 s at rtol 1e-7)."""
+    crossings microns apart must press about once whichever it is: merged only when
+    coincident to 1 nm, they pressed two to six times by turns, the push jumping
+    2.5x, and the integrator stalled there (t = 13.85 s at rtol 1e-7). The points
+    microns from one found before press with a part of a point's share
+    (:func:`boxes._add_point`), which the axis taken moves by up to 1 % here."""
     Ra = Rotation.from_rotvec([0.01609086462634306, 0.04169775524926448, 0.00015490694295961]).as_matrix()
     ca = np.array([0.24998563457801365, -0.15002855361305445, -0.01327525164390699])
     rb = Rotation.from_rotvec([0.01611815453222211, 0.0417050538861146, 0.00015439597318223])
@@ -229,10 +236,9 @@ def test_near_coplanar_side_faces_press_once_whichever_face_the_axis_takes():
     pushes = []
     for _ in range(40):
         Rb = (Rotation.from_rotvec(rng.standard_normal(3) * 1e-9) * rb).as_matrix()
-        _, _, _, depths = points_of(Ra, ca, HALF, Rb, cb, HALF)
-        pushes.append(sum(panel_contact.contact_law(d, 0.0, 2.5e6, 0.0)[0] for d in depths))
+        pushes.append(pushed(Ra, ca, HALF, Rb, cb, HALF, 1e7))
     assert min(pushes) > 0.0
-    assert max(pushes) / min(pushes) < 1.001
+    assert max(pushes) / min(pushes) < 1.01
 
 
 def paper_model(*sets):

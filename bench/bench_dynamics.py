@@ -2,8 +2,8 @@
 
     python bench/bench_dynamics.py [--window S] [--repeats R] [method ...]
 
-Methods: any simulation.method name ("dopri5", "ros34pw2", "compiled" (the
-choice of the two), and the scipy names); default: both compiled schemes over a tolerance sweep, the
+Methods: any simulation.method name ("dopri5", "tsit5", "ros34pw2", "compiled"
+(tsit5 or ros34pw2), and the scipy names); default: the compiled schemes over a tolerance sweep, the
 scipy methods at rtol 1e-6. For each closure model (penalty, exact) it prints
 the RHS and stiff-Jacobian cost (median of 5 runs of 2000 calls inside numba),
 then per method and rtol (atol = 1e-2 rtol): the median over R runs of the
@@ -31,7 +31,7 @@ from panel_deploy.dynamics.simulate import simulate
 from panel_deploy.scene import load_scene
 
 SCIPY = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA")
-COMPILED = ("dopri5", "ros34pw2", "compiled")
+COMPILED = ("dopri5", "tsit5", "ros34pw2", "compiled")
 SWEEP = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
 #: Tried in turn: the exact closure's DOPRI5 step collapses at rtol 1e-11 (t ~ 0.1 s).
 REFERENCE_RTOL = (1e-11, 1e-10, 1e-9)

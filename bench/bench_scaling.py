@@ -49,11 +49,14 @@ once with the paper's stops (ramp 0): wall time per simulated second, steps,
 the ratio to the ramped run and how far the first collision moves; and once
 over ``LONG_WINDOW`` (1 s): wall time per simulated second, steps, and the
 steps per simulated second after the short window against those within it.
+And the larger arrays once on Dormand and Prince's pair (``method: dopri5``)
+in place of the Tsitouras pair that ``compiled`` takes: the same figures as
+for the paper's stops.
 
 Then the shipped 10 x 10 design (``DESIGN``, heavily damped: c/k 3 s) over its
-whole deployment at the scene's tolerances, once on DOPRI5 alone and once as
-``compiled``, which hands over to ROS34PW2 where DOPRI5 is held at its
-stability limit: wall time, steps, when it handed over, the first flat
+whole deployment at the scene's tolerances, once on the explicit pair alone
+(``tsit5``) and once as ``compiled``, which hands over to ROS34PW2 where the
+pair is held at its stability limit: wall time, steps, when it handed over, the first flat
 sample of each and the largest angle between the two runs.
 
 Then the exponent of each figure against n, the number of bodies, by least
@@ -77,6 +80,7 @@ from panel_deploy import fold
 from panel_deploy.build import build_model
 from panel_deploy.collision import CollisionSettings, TrajectoryCheck, check_trajectory
 from panel_deploy.dynamics import simulate
+from panel_deploy.dynamics.compiled import EXPLICIT_PAIR
 from panel_deploy.dynamics.report import dynamics_summary
 from panel_deploy.scene import load_scene
 
@@ -109,17 +113,17 @@ WARM_UP = 1e-4
 
 
 def design_runs():
-    """The heavily damped 10 x 10 design over its deployment, on DOPRI5 alone
-    and as ``compiled`` (the hand-over): lines of text."""
+    """The heavily damped 10 x 10 design over its deployment, on the explicit
+    pair alone and as ``compiled`` (the hand-over): lines of text."""
     scene = load_scene(DESIGN)
     model = build_model(scene)
-    runs = {m: simulate(model, replace(scene.simulation, method=m)) for m in ("dopri5", "compiled")}
+    runs = {m: simulate(model, replace(scene.simulation, method=m)) for m in (EXPLICIT_PAIR, "compiled")}
     flat = {m: dynamics_summary(model, r, flat_tolerance=scene.simulation.flat_tolerance)["time_to_flat"]
             for m, r in runs.items()}
-    a, b = runs["dopri5"], runs["compiled"]
+    a, b = runs[EXPLICIT_PAIR], runs["compiled"]
     lines = [f"  {m:8s} {r.wall_time:6.1f} s wall, {r.nsteps:7d} steps, {r.scheme}, "
              f"flat at {flat[m]} s, {r.message}" for m, r in runs.items()]
-    return lines + [f"  compiled / dopri5: {b.wall_time / a.wall_time:.2f}x the wall time, "
+    return lines + [f"  compiled / {EXPLICIT_PAIR}: {b.wall_time / a.wall_time:.2f}x the wall time, "
                     f"{b.nsteps / a.nsteps:.2f}x the steps; largest angle between the two runs "
                     f"{np.abs(a.theta - b.theta).max():.2g} rad"]
 
@@ -214,10 +218,12 @@ def measure(rows, cols, t_end, repeats, closure, stop_ramp):
     simulate(model, replace(scene.simulation, method="ros34pw2", t_end=WARM_UP, samples=2))
     sweep = [(rtol, atol, *compare_run(with_tolerances(scene, rtol, atol), model, report.first_collision))
              for rtol, atol in TOLERANCES]
-    paper_stops = long = None
+    paper_stops = long = dopri5 = None
     if rows is not None:
         plain = scene_of(rows, cols, t_end, closure, 0.0)[0]
         paper_stops = compare_run(plain, build_model(plain), report.first_collision)
+        dopri5 = compare_run(replace(scene, simulation=replace(scene.simulation, method="dopri5")), model,
+                             report.first_collision)
         long = simulate(model, scene_of(rows, cols, LONG_WINDOW, closure, stop_ramp)[0].simulation)
     return dict(
         label=label, bodies=model.n_bodies, joints=model.n_coords, pairs=len(model.collision_pairs),
@@ -230,7 +236,7 @@ def measure(rows, cols, t_end, repeats, closure, stop_ramp):
         exact=report.counters["exact_pairs"] / report.counters["samples"], checked=report.counters["samples"],
         identical=same(off, on),
         contacts=len(model.contact_pairs), outcome=outcome(report), sweep=sweep, paper_stops=paper_stops,
-        long=long)
+        dopri5=dopri5, long=long)
 
 
 def with_tolerances(scene, rtol, atol):
@@ -321,14 +327,15 @@ def main(argv=None):
         lines.append(f"  {x['label']:22s} " + "; ".join(
             f"{rtol:g}/{atol:g}: {per_s:6.2f} s/s, {error}"
             for rtol, atol, per_s, _, error in x["sweep"]))
-    lines += ["", "the paper's stops (contact.stop_ramp 0) on the larger arrays, one run: wall s per "
-              "simulated s, steps, both as ratios to the ramped run, and its first collision's time "
-              "less the ramped run's:"]
-    for x in rows:
-        if x["paper_stops"] is not None:
-            per_s, steps, error = x["paper_stops"]
-            lines.append(f"  {x['label']:22s} {per_s:6.2f} s/s ({per_s / x['sim_per_s']:.2f}x), "
-                         f"{steps} steps ({steps / x['steps']:.2f}x), {error}")
+    for key, what in (("paper_stops", "the paper's stops (contact.stop_ramp 0)"),
+                      ("dopri5", "Dormand and Prince's pair (method dopri5)")):
+        lines += ["", f"{what} on the larger arrays, one run: wall s per simulated s, steps, both as "
+                  "ratios to the bench's run, and its first collision's time less the bench's:"]
+        for x in rows:
+            if x[key] is not None:
+                per_s, steps, error = x[key]
+                lines.append(f"  {x['label']:22s} {per_s:6.2f} s/s ({per_s / x['sim_per_s']:.2f}x), "
+                             f"{steps} steps ({steps / x['steps']:.2f}x), {error}")
     lines += ["", f"the larger arrays over 0-{LONG_WINDOW:g} s, one run: wall s per simulated s, steps, "
               "steps per simulated s after the short window against within it, and how the run ended:"]
     for x in rows:

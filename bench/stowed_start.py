@@ -9,7 +9,7 @@ springs at the overlap's corners and with a pressure over it
 (``contact.pressure``), over its
 first ``--start`` seconds and over the whole window (0.2 s): wall time (median
 of ``--repeats``), accepted steps, right-hand-side evaluations and, for the
-DOPRI5 loop, the attempts its error test rejected ((evaluations - 1) / 6 less
+explicit pairs' loop, the attempts its error test rejected ((evaluations - 1) / 6 less
 the steps; a step cut short onto a contact switch counts as rejected here).
 The share of the window's wall time that its start takes says how much the
 stowed stacks cost: there the pressed pairs make each evaluation dear, and
@@ -28,16 +28,17 @@ from bench_fold import timed
 from bench_scaling import ROOT, STOP_RAMP, scene_of
 from panel_deploy.build import build_model
 from panel_deploy.dynamics import simulate
+from panel_deploy.dynamics.erk import PAIRS
 
 WINDOW = 0.2  # s, bench_scaling's window for the larger arrays
-DOPRI5_STAGES = 6  # evaluations of one attempt of the compiled DOPRI5 loop (FSAL)
+STAGES = 6  # evaluations of one attempt of the explicit pairs' compiled loop (FSAL)
 
 
 def rejected(result) -> str:
-    """The rejected attempts of a DOPRI5 run, else "-" (other schemes count otherwise)."""
-    if result.scheme != "dopri5":
+    """The rejected attempts of a run on an explicit pair, else "-" (other schemes count otherwise)."""
+    if result.scheme not in PAIRS:
         return "-"
-    return str((result.nfev - 1) // DOPRI5_STAGES - result.nsteps)
+    return str((result.nfev - 1) // STAGES - result.nsteps)
 
 
 def main(argv=None):

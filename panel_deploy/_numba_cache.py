@@ -61,7 +61,7 @@ LOCATORS = ",".join([*(f"panel_deploy._kernel_locator.{name}" for name in
 #: (test_startup checks that every file with a kernel is here).
 KERNEL_SOURCES = ("boxes.py", "collision/geometry.py", "collision/monitor.py", "collision/motion.py",
                   "collision/refine.py", "dynamics/_jit.py", "dynamics/air.py", "dynamics/articulated.py",
-                  "dynamics/closure.py", "dynamics/compiled.py", "dynamics/dopri5.py", "dynamics/hinges.py",
+                  "dynamics/closure.py", "dynamics/compiled.py", "dynamics/erk.py", "dynamics/hinges.py",
                   "dynamics/integration.py", "dynamics/kernels.py", "dynamics/pack.py",
                   "dynamics/panel_contact.py", "dynamics/rosenbrock.py", "dynamics/spatial.py",
                   "dynamics/stiff.py", "dynamics/switches.py")

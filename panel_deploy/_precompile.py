@@ -42,7 +42,7 @@ def jobs(scene: str, folder: Path) -> list[list[str]]:
         ["simulate", scene, "--out", trajectory, "--record", recording],
         ["collide", trajectory],
         ["collide", recording],
-        # the exact closure is not stiff: the explicit DOPRI5 loop
+        # the exact closure is not stiff: the explicit pairs' loop
         ["simulate", scene, "--closure", "exact", "--t-end", "0.05"],
         ["simulate", scene, "--method", "RK45", "--t-end", "0.01"],
         ["simulate", scene, *LARGER],

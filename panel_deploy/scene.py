@@ -23,7 +23,8 @@ from .errors import SceneError, shown
 
 #: ``simulation.method`` names: the integrators of
 #: :data:`panel_deploy.dynamics.integrate.METHODS` (a test keeps the two equal).
-INTEGRATORS = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA", "dopri5", "ros34pw2", "compiled")
+INTEGRATORS = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA", "dopri5", "tsit5", "ros34pw2",
+               "compiled")
 
 # --- limits: sanity bounds stated in the schema, so absurd input fails at once ---
 #: Panels along one side: the circuit search, packing check and model are
@@ -411,8 +412,8 @@ class SimulationSection:
                                                                   "ten minutes is far beyond"), "s",
                         "end time")
     method: str = spec("RK23", choice(*INTEGRATORS), "",
-                       "integrator: scipy's RK23 ... LSODA, the compiled dopri5 or ros34pw2, or "
-                       "compiled (the one of those two that suits the start state)")
+                       "integrator: scipy's RK23 ... LSODA, the compiled dopri5, tsit5 or "
+                       "ros34pw2, or compiled (tsit5 or ros34pw2, whichever suits the start state)")
     rtol: float = spec(1.0e-6, number(0, low_open=True), "", "relative tolerance")
     atol: float = spec(1.0e-8, number(0, low_open=True, floor=1e-12,
                                       why="far below any hinge's accuracy, and near double "

@@ -8,7 +8,7 @@ import re
 import numpy as np
 import pytest
 
-from panel_deploy.dynamics import hinges, kernels, rosenbrock, simulate, stiff
+from panel_deploy.dynamics import compiled, erk, hinges, kernels, rosenbrock, simulate, stiff
 from panel_deploy.dynamics.compiled import choose_scheme, stiffness
 from panel_deploy.dynamics.kernels import state_vector
 from panel_deploy.dynamics.pack import pack
@@ -36,23 +36,25 @@ def test_stiff_overdamped_hinge_matches_closed_form():
     assert r.nsteps < explicit_steps / 20
 
 
-def test_compiled_hands_over_to_ros34pw2_once_dopri5_is_held_at_its_stability_limit():
+@pytest.mark.parametrize("pair", ["tsit5", "dopri5"])
+def test_compiled_hands_over_to_ros34pw2_once_its_pair_is_held_at_its_stability_limit(pair, monkeypatch):
     """Roots -5e3 and -10 1/s: too mild at the start for choose_scheme (3.3 / 5e3 s
     is above STIFF_STEP), but from the first steps on the slow root alone would let
-    the steps grow far past DOPRI5's stability limit, 3.3 / 5e3 s."""
+    the steps grow far past the explicit pair's stability limit, ~3.3 / 5e3 s."""
+    monkeypatch.setattr(compiled, "EXPLICIT_PAIR", pair)
     model, lam, exact = overdamped_plate()
     P = pack(model)
     y0 = state_vector([1.0], [0.0])
-    assert choose_scheme(P, y0) == "dopri5"
+    assert choose_scheme(P, y0) == pair
     T = 1.0
-    explicit_steps = T * np.abs(lam).max() / 3.3
-    settings = SimulationSection(t_end=T, method="dopri5", rtol=1e-6, atol=1e-9, samples=41)
+    explicit_steps = T * np.abs(lam).max() / erk.PAIRS[pair].stiff_ratio
+    settings = SimulationSection(t_end=T, method=pair, rtol=1e-6, atol=1e-9, samples=41)
     state = State(0.0, y0[:1], y0[1:2])
     held = simulate(model, settings, state)
-    assert held.success and held.scheme == "dopri5" and held.nsteps > 0.9 * explicit_steps
+    assert held.success and held.scheme == pair and held.nsteps > 0.9 * explicit_steps
     r = simulate(model, dataclasses.replace(settings, method="compiled"), state)
     assert r.success, r.message
-    switch = re.fullmatch(r"dopri5, then ros34pw2 from t = (\S+) s", r.scheme)
+    switch = re.fullmatch(pair + r", then ros34pw2 from t = (\S+) s", r.scheme)
     assert switch and 0.0 < float(switch[1]) < 0.05, r.scheme
     assert r.nsteps < held.nsteps / 3 and r.njev > 0
     assert np.abs(r.theta[:, 0] - exact(r.t)).max() < 1e-5
@@ -104,14 +106,14 @@ def test_stiff_jacobian_holds_the_stiff_spectrum(closure):
     np.testing.assert_allclose(ev_st, ev_fd, rtol=0.05)
 
 
-def test_auto_keeps_dopri5_for_a_mild_model():
+def test_auto_keeps_the_explicit_pair_for_a_mild_model():
     model = plate_on_hinge(c=0.02)
     P = pack(model)
     y0 = state_vector([1.0], [0.0])
     assert 3.3 / stiffness(P, y0) > 2e-4
     r = simulate(model, SimulationSection(t_end=0.05, method="compiled", samples=6),
                  State(0.0, y0[:1], y0[1:2]))
-    assert r.success and r.scheme == "dopri5"
+    assert r.success and r.scheme == "tsit5"
 
 
 @pytest.mark.parametrize("closure", ["penalty", "exact"])

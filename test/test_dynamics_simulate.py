@@ -34,7 +34,7 @@ def plate_reference(model, theta0, t):
     return solve_ivp(f, (0, t[-1]), [theta0, 0.0], t_eval=t, rtol=1e-12, atol=1e-12).y
 
 
-@pytest.mark.parametrize("method", ["RK45", "dopri5", "ros34pw2", "Radau"])
+@pytest.mark.parametrize("method", ["RK45", "dopri5", "tsit5", "ros34pw2", "Radau"])
 @pytest.mark.parametrize("gravity", [(0.0, 0.0, 0.0), (0.0, 0.0, 9.81)])
 def test_plate_matches_scalar_ode(method, gravity):
     # damping keeps the plate inside [0, pi] (no contact): zeta ~ 1 without gravity;
@@ -112,7 +112,7 @@ def swing(model, method="compiled", t_end=1.0):
     return r
 
 
-@pytest.mark.parametrize("method", ["RK45", "Radau", "dopri5", "ros34pw2"])
+@pytest.mark.parametrize("method", ["RK45", "Radau", "dopri5", "tsit5", "ros34pw2"])
 def test_air_drag_only_removes_energy(method):
     """A pendulum (no spring, no damper; gravity across the horizontal hinge axis,
     equilibrium at theta = pi/2, swinging within (0, pi)) loses energy to the air
@@ -278,6 +278,7 @@ def paper():
 @pytest.mark.parametrize("method, scheme, t_end, samples, block", [
     ("compiled", "ros34pw2", 0.5, 101, 7),  # the paper scene is stiff at the start
     ("dopri5", "dopri5", 0.5, 101, 7),
+    ("tsit5", "tsit5", 0.5, 101, 7),
     ("RK45", "RK45", 0.05, 21, 4),
     ("Radau", "Radau", 0.03, 13, 4),
 ])
@@ -297,15 +298,15 @@ def test_paper_segments_are_simulate_bit_for_bit(paper, method, scheme, t_end, s
 
 
 def test_a_run_that_hands_over_is_simulate_bit_for_bit_in_blocks():
-    """The hand-over from DOPRI5 to ROS34PW2 of method compiled (at ~0.017 s here)
+    """The hand-over from tsit5 to ROS34PW2 of method compiled (at ~0.017 s here)
     falls inside the second block; the blocks after it continue on ROS34PW2."""
     model, _, _ = overdamped_plate()
     settings = SimulationSection(t_end=0.5, method="compiled", rtol=1e-6, atol=1e-9, samples=51)
     state = State(0.0, np.array([1.0]), np.zeros(1))
     whole = simulate(model, settings, state)
-    assert whole.success and whole.scheme.startswith("dopri5, then ros34pw2 from t = ")
+    assert whole.success and whole.scheme.startswith("tsit5, then ros34pw2 from t = ")
     blocks = list(simulate_segments(model, settings, state, segment_samples=1))
-    assert blocks[0].scheme == "dopri5" and blocks[-1].scheme == whole.scheme
+    assert blocks[0].scheme == "tsit5" and blocks[-1].scheme == whole.scheme
     assert_same_run(blocks, whole)
 
 

@@ -87,13 +87,13 @@ from panel_deploy.scene import SimulationSection
 from test_dynamics_helpers import plate_on_hinge
 model = plate_on_hinge()
 simulate(model, SimulationSection(t_end=0.05, method="dopri5", samples=3))
-print(len(compiled.COMPILED_LOOPS[compiled.DOPRI5].signatures),
+print(len(compiled.COMPILED_LOOPS[compiled.EXPLICIT].signatures),
       len(compiled.COMPILED_LOOPS[compiled.ROS34PW2].signatures),
       len(rosenbrock.step.signatures))
 """
 
 
-def test_dopri5_run_does_not_compile_the_rosenbrock_loop(tmp_path):
+def test_an_explicit_run_does_not_compile_the_rosenbrock_loop(tmp_path):
     # the package's own cache (next to the sources), warm after the first test run;
     # with numba's own locators this process would rewrite the installed package's
     # cache index with numba's stamp, and the package's next run would compile anew
@@ -189,7 +189,7 @@ def test_the_kernel_stamp_follows_the_sources_contents_not_their_times(tmp_path)
 
 def test_the_packages_kernels_carry_the_kernel_stamp():
     from panel_deploy.dynamics import compiled, kernels
-    for kernel in (kernels.rhs, compiled.COMPILED_LOOPS[compiled.DOPRI5]):
+    for kernel in (kernels.rhs, compiled.COMPILED_LOOPS[compiled.EXPLICIT]):
         assert kernel._cache._cache_file._source_stamp == _numba_cache.kernel_sources_stamp()
 
 

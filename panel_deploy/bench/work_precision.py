@@ -33,7 +33,7 @@ from ..model import Model
 from ..scene import INTEGRATORS, SimulationSection
 from .mujoco_peer import run_mujoco
 
-#: Every integrator but "compiled", which is one of dopri5 and ros34pw2.
+#: Every integrator but "compiled", which is one of tsit5 and ros34pw2.
 SWEPT_METHODS = tuple(m for m in INTEGRATORS if m != "compiled")
 
 SAMPLE_INTERVAL = 1e-3

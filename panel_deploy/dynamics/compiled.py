@@ -1,7 +1,8 @@
 """The compiled step loop: the whole adaptive loop in numba around either
-the explicit Dormand-Prince 5(4) pair (:mod:`.dopri5`) or the linearly
-implicit Rosenbrock-W ROS34PW2 (:mod:`.rosenbrock`), and the choice between
-the two for ``simulation.method: compiled`` (:func:`choose_scheme`)."""
+an explicit Runge-Kutta 5(4) pair (:mod:`.erk`: Tsitouras' or Dormand and
+Prince's) or the linearly implicit Rosenbrock-W ROS34PW2
+(:mod:`.rosenbrock`), and the choice between the two for
+``simulation.method: compiled`` (:func:`choose_scheme`)."""
 
 from __future__ import annotations
 
@@ -10,18 +11,20 @@ import math
 import numpy as np
 from numba import njit
 
-from . import articulated, dopri5, integration, kernels, panel_contact, rosenbrock, stiff, switches
+from . import articulated, erk, integration, kernels, panel_contact, rosenbrock, stiff, switches
 from ._jit import FLOAT_MATH
 from .result import Status, no_onsets
 
-#: Compiled schemes (keys of ``COMPILED_LOOPS``).
-DOPRI5, ROS34PW2 = 0, 1
-SCHEMES = {"dopri5": DOPRI5, "ros34pw2": ROS34PW2}
+#: Compiled loops (keys of ``COMPILED_LOOPS``): the explicit pairs' (each
+#: pair is an argument, :data:`.erk.PAIRS`) and ROS34PW2's.
+EXPLICIT, ROS34PW2 = 0, 1
+#: The loop of each compiled scheme's name.
+SCHEMES = {**{name: EXPLICIT for name in erk.PAIRS}, "ros34pw2": ROS34PW2}
 #: Key of the ROS34PW2 loop on the O(n) path (where :func:`articulated.applies`).
 ROS34PW2_TERMS = 2
 #: Hairer's DOPRI5 code calls a problem stiff after 15 accepted steps at the
-#: stability limit, and forgets them after 6 below it. Status of a DOPRI5 loop
-#: that found so (``hand_over``).
+#: stability limit, and forgets them after 6 below it. Status of an explicit
+#: loop that found so (``hand_over``).
 STIFF_STEPS, STIFF_RESET, HAND_OVER = 15, 6, 1
 
 
@@ -39,7 +42,8 @@ def rms_norm(e, y0, y1, rtol, atol):
 def compiled_loop(scheme):
     """The compiled loop of one scheme: ``loop(P, t_eval, Y, onsets, j, j_stop,
     carry, counts, rtol, atol, max_step, locate, max_steps, gap_limit,
-    hand_over)``.
+    hand_over, pair)``, ``pair`` the explicit pair (:data:`.erk.PAIRS`; ROS34PW2's
+    loops take one too, and leave it).
 
     One loop per scheme, not one with both: ``implicit`` is a constant of
     each, so numba prunes the other scheme's branches before typing them, and
@@ -49,14 +53,14 @@ def compiled_loop(scheme):
     O(n) stiff Jacobian): chosen at run time inside one loop, it cost the
     paper scene's dense steps ~6 %.
 
-    DOPRI5 steps exactly onto every t_eval[j]. ROS34PW2 steps freely and fills
+    The explicit pairs step exactly onto every t_eval[j]. ROS34PW2 steps freely and fills
     the samples it passes by cubic Hermite interpolation of y and f at the step
     ends (third order, as the method), so a fine sample grid does not cap its
     step: at 1 ms samples on the paper scene, stepping onto them took ~2x the
     steps the tolerance needed.
 
-    ``scheme`` DOPRI5: explicit Dormand-Prince 5(4) (scipy RK45's tableau and
-    step control). ROS34PW2: the Rosenbrock-W method of :mod:`.rosenbrock`
+    ``scheme`` EXPLICIT: the explicit 5(4) ``pair`` with scipy RK45's step
+    control. ROS34PW2: the Rosenbrock-W method of :mod:`.rosenbrock`
     with the stiff Jacobian (:func:`stiff.stiff_jacobian`, or for
     ROS34PW2_TERMS :func:`rosenbrock.terms`; about one RHS call) taken at the
     start of every step; the first stage reuses f(y), so a
@@ -78,8 +82,9 @@ def compiled_loop(scheme):
     the starting step are computed. ``max_steps`` bounds the run's total
     nsteps.
 
-    ``hand_over`` (DOPRI5 only): test every accepted step for the stability
-    limit (:func:`.dopri5.stiffness_ratio`) and return with status
+    ``hand_over`` (EXPLICIT only): test every accepted step for the stability
+    limit (:func:`.erk.stiffness_ratio` above the pair's ``stiff_ratio``) and
+    return with status
     ``HAND_OVER`` once STIFF_STEPS accepted steps have been at it, with never
     STIFF_RESET in a row below it in between: the caller goes on with
     ROS34PW2 from ``carry`` (:func:`integrate_compiled`).
@@ -96,7 +101,7 @@ def compiled_loop(scheme):
 
     @njit(cache=True, **FLOAT_MATH)
     def loop(P, t_eval, Y, onsets, j, j_stop, carry, counts, rtol, atol, max_step,
-             locate, max_steps, gap_limit, hand_over):
+             locate, max_steps, gap_limit, hand_over, pair):
         N = Y.shape[1]
         n = P.n
         s = t_eval.shape[0]
@@ -112,7 +117,7 @@ def compiled_loop(scheme):
         # the last step was shortened onto a switch: do not locate in the next
         landed = counts[5] != 0
         rejected = counts[6] != 0  # the last attempt was rejected by the error test
-        stiff_steps = counts[7]  # consecutive accepted DOPRI5 steps at the stability limit
+        stiff_steps = counts[7]  # consecutive accepted explicit steps at the stability limit
         calm_steps = counts[8]  # accepted steps below it since the last at it
         expo = -1.0 / (rosenbrock.ERROR_ORDER if implicit else 5)
         near = panel_contact.near_pairs(P)
@@ -155,7 +160,7 @@ def compiled_loop(scheme):
                 nfev += 3
                 nlu += 1
             else:
-                y1, err, y6 = dopri5.step(P, y, f, step, K, near)
+                y1, err, y6 = erk.step(P, y, f, step, pair, K, near)
                 nfev += 6
             en = rms_norm(err, y, y1, rtol, atol)
             if not math.isfinite(en):
@@ -188,7 +193,7 @@ def compiled_loop(scheme):
                     if lands:
                         Y[j] = y
                         j += 1
-                # the step's last right-hand side was at its end: DOPRI5's K[6], f
+                # the step's last right-hand side was at its end: the explicit pair's K[6], f
                 integration.record_onsets(P, y, t, t_eval, j, onsets, near, True)
                 nsteps += 1
                 if gap_limit > 0.0 and integration.max_gap(P, y) > gap_limit:
@@ -202,7 +207,7 @@ def compiled_loop(scheme):
                     break
                 if not implicit:
                     if hand_over:
-                        if dopri5.stiffness_ratio(K, y, y6, step, 2 * n) > dopri5.STIFF_RATIO:
+                        if erk.stiffness_ratio(K, y, y6, step, 2 * n) > pair.stiff_ratio:
                             stiff_steps += 1
                             calm_steps = 0
                         else:
@@ -240,12 +245,17 @@ def compiled_loop(scheme):
 
 
 #: The compiled loop of each scheme (see :func:`compiled_loop`).
-COMPILED_LOOPS = {k: compiled_loop(k) for k in (DOPRI5, ROS34PW2, ROS34PW2_TERMS)}
+COMPILED_LOOPS = {k: compiled_loop(k) for k in (EXPLICIT, ROS34PW2, ROS34PW2_TERMS)}
 
 
-#: ``choose_scheme`` takes ROS34PW2 when DOPRI5's stability limit on the
-#: negative real axis, about 3.3 / rho, is below this step, s.
+#: ``choose_scheme`` takes ROS34PW2 when an explicit pair's stability limit on
+#: the negative real axis, about 3.3 / rho, is below this step, s.
 STIFF_STEP = 2e-4
+
+#: The explicit pair of ``method: compiled``: Tsitouras' takes 4-10 % fewer
+#: evaluations than Dormand and Prince's on the larger arrays at the scenes'
+#: tolerances, with errors as small or smaller (docs/findings.md 5).
+EXPLICIT_PAIR = "tsit5"
 
 
 def stiffness(P, y) -> float:
@@ -260,31 +270,32 @@ def stiffness(P, y) -> float:
 
 def choose_scheme(P, y0) -> str:
     """The compiled scheme for ``method="compiled"``: "ros34pw2" if the model is
-    stiff at y0 (``3.3 / stiffness > STIFF_STEP``), else "dopri5".
+    stiff at y0 (``3.3 / stiffness > STIFF_STEP``), else :data:`EXPLICIT_PAIR`.
 
-    Measured crossover: on the paper scene (penalty closure, rho ~ 7e4 1/s at
+    Measured crossover (with DOPRI5, whose stability region Tsitouras' pair
+    matches within 6 %): on the paper scene (penalty closure, rho ~ 7e4 1/s at
     the stowed state) ROS34PW2 needs 3-25 x less time than DOPRI5 for the
     same error from rtol 1e-2 to 1e-6; on mildly stiff or non-stiff models
     (rho < 1e4 1/s) DOPRI5, of order 5 against 3, is as fast or faster,
     increasingly so at tight tolerances. Contacts that start later (k_s, c_s)
-    are not foreseen: a tree that starts out of contact gets DOPRI5.
+    are not foreseen: a tree that starts out of contact gets the explicit pair.
     """
-    return "ros34pw2" if stiffness(P, y0) * STIFF_STEP > 3.3 else "dopri5"  # a model without stiffness: 0
+    return "ros34pw2" if stiffness(P, y0) * STIFF_STEP > 3.3 else EXPLICIT_PAIR  # a model without stiffness: 0
 
 
 def _loop_of(scheme, P):
-    """The compiled loop that runs ``scheme`` ("dopri5" or "ros34pw2") on P."""
+    """The compiled loop that runs ``scheme`` (a name of :data:`SCHEMES`) on P."""
     key = SCHEMES[scheme]
     return COMPILED_LOOPS[ROS34PW2_TERMS if key == ROS34PW2 and articulated.applies(P.n) else key]
 
 
 def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
-    """The compiled loop of scheme ``name`` ("dopri5", "ros34pw2", or "compiled":
-    :func:`choose_scheme` picks) called once per block of samples (see
-    :func:`integrate_blocks`).
+    """The compiled loop of scheme ``name`` (a name of :data:`SCHEMES`, or
+    "compiled": :func:`choose_scheme` picks) called once per block of samples
+    (see :func:`integrate_blocks`).
 
-    "compiled" that starts on DOPRI5 hands over to ROS34PW2 for the rest of
-    the run once DOPRI5's steps are held at its stability limit (the loop's
+    "compiled" that starts on its explicit pair hands over to ROS34PW2 for the
+    rest of the run once the pair's steps are held at its stability limit (the loop's
     ``hand_over``), as LSODA does: choose_scheme judges the start state
     alone, and a heavily damped array turns stiff soon after it (10 x 10 at
     c/k 3 s within 0.1 s) or once its hinges come onto their stops (8 x 8 at
@@ -293,8 +304,9 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
     accuracy never reach the limit (docs/findings.md 5).
     """
     scheme = choose_scheme(P, y0) if name == "compiled" else name
-    hand_over = name == "compiled" and scheme == "dopri5"
+    hand_over = name == "compiled" and scheme == EXPLICIT_PAIR
     loop = _loop_of(scheme, P)
+    pair = erk.PAIRS.get(scheme, erk.PAIRS[EXPLICIT_PAIR])  # ROS34PW2's loops leave it
     s, N = len(t_eval), len(y0)
     Y = np.full((s, N), np.nan)
     Y[0] = y0
@@ -312,13 +324,13 @@ def integrate_compiled(name, P, y0, t_eval, settings, max_steps, gap_limit, stop
                 j, status, code = loop(
                     P, t_eval, Y, onsets, j, int(stop), carry, counts, settings.rtol,
                     settings.atol, settings.max_step, switches.locates(P, settings), max_steps,
-                    gap_limit, hand_over)
+                    gap_limit, hand_over, pair)
             except ZeroDivisionError:  # 1/0 in boxes.py, on numba's error model (the dynamics: inf)
                 status, code = -1, -Status.NON_FINITE
             if status != HAND_OVER:
                 break
             status, hand_over, loop = 0, False, _loop_of("ros34pw2", P)
-            scheme = f"dopri5, then ros34pw2 from t = {carry[0]:.6g} s"
+            scheme = f"{scheme}, then ros34pw2 from t = {carry[0]:.6g} s"
         message = integration.FAILURES.get(code, "")
         status = Status(-min(code, 4) if status else 0)
         done = integration.leading_finite(Y, done, j)

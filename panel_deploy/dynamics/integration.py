@@ -36,7 +36,7 @@ class Integration:
     ``y`` (s_done, N) holds the samples reached; ``status`` a
     :class:`~panel_deploy.dynamics.result.Status` (0 = t_end reached, negative
     = failure with ``message``); ``method`` the :data:`.integrate.METHODS` entry that ran
-    ("dopri5" or "ros34pw2" for "compiled"); ``onsets`` (s_done, 9) the
+    ("tsit5" or "ros34pw2" for "compiled"); ``onsets`` (s_done, 9) the
     fastest panel contact onset in each sample's interval (:func:`record_onsets`).
     """
 

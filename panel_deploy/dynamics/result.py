@@ -117,8 +117,8 @@ class SimulationResult:
         ``simulation.method`` as asked for.
     scheme : str
         The integrator that ran: ``method``, or for "compiled" the scheme it
-        chose ("dopri5" or "ros34pw2"), or "dopri5, then ros34pw2 from t = T s" where
-        DOPRI5 handed over (:func:`~panel_deploy.dynamics.compiled.integrate_compiled`).
+        chose ("tsit5" or "ros34pw2"), or "tsit5, then ros34pw2 from t = T s" where
+        tsit5 handed over (:func:`~panel_deploy.dynamics.compiled.integrate_compiled`).
     gap_limit : float
         Loop-closure gap that would have ended the run, m (0 for a tree).
     """

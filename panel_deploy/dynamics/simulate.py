@@ -40,8 +40,8 @@ def simulate(model: Model, settings, state: State | None = None, *,
     settings : SimulationSection (or any object with its attributes)
         ``t_end`` (s, absolute end time), ``method`` (a name in
         :data:`~panel_deploy.dynamics.integrate.METHODS`: RK23, RK45, DOP853,
-        Radau, BDF, LSODA; dopri5, ros34pw2, or compiled, which takes ros34pw2
-        when the model is stiff at the start state and dopri5 otherwise),
+        Radau, BDF, LSODA; dopri5, tsit5, ros34pw2, or compiled, which takes
+        ros34pw2 when the model is stiff at the start state and tsit5 otherwise),
         ``rtol``, ``atol``, ``max_step`` (s),
         ``samples`` (number of evenly spaced t_j from ``state.t`` to
         ``t_end``) and ``events`` (locate contact switches).
@@ -96,7 +96,7 @@ def simulate_segments(model: Model, settings, state: State | None = None, *,
     model, settings, state, max_steps, gap_limit
         As for :func:`simulate`; ``max_steps`` is the budget of the whole run,
         and "compiled" picks its scheme at the start state (handing over from
-        DOPRI5 to ROS34PW2 at most once, inside a block).
+        tsit5 to ROS34PW2 at most once, inside a block).
     segment_samples : int, optional
         Samples per block (the first block also holds the start sample);
         default all of them in one block.

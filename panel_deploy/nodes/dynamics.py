@@ -42,7 +42,8 @@ from . import messages, runtime
 _DOC = {
     "stiffness": "k, N m/rad: one per stiffness group or one per hinge; unset or empty: the scene's",
     "damping_ratio": "c/k of every hinge, s; negative: the scene's",
-    "method": "integrator (RK23, RK45, DOP853, Radau, BDF, LSODA, dopri5, ros34pw2, compiled); empty: the scene's",
+    "method": "integrator (RK23, RK45, DOP853, Radau, BDF, LSODA, dopri5, tsit5, ros34pw2, compiled); "
+              "empty: the scene's",
     "rtol": "relative tolerance of the integrator; 0: the scene's",
     "closure": "loop closure: penalty or exact; empty: the scene's",
     "t_end": "simulated end time, s; 0: the scene's",

@@ -129,20 +129,28 @@ def least_overlap(Ra, ca, ha, Rb, cb, hb, stop_below=-np.inf):
 def separating_axis(Ra, ca, ha, Rb, cb, hb, first):
     """A candidate axis of :func:`least_overlap` (0-14) along which boxes a and
     b (given as in :func:`separation`) do not overlap, trying ``first`` before
-    the others: returns ``(k, overlap)``, the axis and the overlap along it
-    (m, <= 0), or ``(-1, inf)`` if there is none: then, and only then,
-    ``least_overlap(...)[0] > 0`` and the boxes interfere. Moving bodies keep
+    the others: returns ``(k, overlap, axis, along)``, the axis and the overlap
+    along it (m, <= 0) (and a zero axis and along), or if there is none k = -1
+    and what :func:`least_overlap` returns, to the bit: then, and only then,
+    the boxes interfere, and :func:`interference` takes that axis of least
+    overlap from here, not from a second pass over the 15. Moving bodies keep
     their separating axis for many evaluations, so the axis that separated a
     pair last time settles it at the cost of one axis in place of up to 15."""
-    overlap = axis_overlap(Ra, ca, ha, Rb, cb, hb, first)[0]
-    if overlap <= 0.0:
-        return first, overlap
+    overlap0, axis0, along0 = axis_overlap(Ra, ca, ha, Rb, cb, hb, first)
+    if overlap0 <= 0.0:
+        return first, overlap0, (0.0, 0.0, 0.0), 0.0
+    # the least overlap in least_overlap's order (the first of equal ones wins)
+    best, axis, along_best = np.inf, (0.0, 0.0, 0.0), 0.0
     for k in range(15):
-        if k != first:
-            overlap = axis_overlap(Ra, ca, ha, Rb, cb, hb, k)[0]
+        if k == first:
+            overlap, u, along = overlap0, axis0, along0
+        else:
+            overlap, u, along = axis_overlap(Ra, ca, ha, Rb, cb, hb, k)
             if overlap <= 0.0:
-                return k, overlap
-    return -1, np.inf
+                return k, overlap, (0.0, 0.0, 0.0), 0.0
+        if overlap < best:
+            best, axis, along_best = overlap, u, along
+    return -1, best, axis, along_best
 
 
 @njit(cache=True)
@@ -537,6 +545,15 @@ def contact(Ra, ca, ha, Rb, cb, hb, work, pressure=False):
     depth, axis, along = least_overlap(Ra, ca, ha, Rb, cb, hb, 0.0)
     if depth <= 0.0:
         return 0, (0.0, 0.0, 0.0)
+    return interference(Ra, ca, ha, Rb, cb, hb, axis, along, work, pressure)
+
+
+@njit(cache=True)
+def interference(Ra, ca, ha, Rb, cb, hb, axis, along, work, pressure):
+    """:func:`contact` of boxes that interfere, given their axis of least
+    overlap (a unit 3-tuple) and the centre offset along it, m (both as
+    :func:`least_overlap` returns them, or :func:`separating_axis` where it
+    finds no separating axis)."""
     s = 1.0 if along >= 0.0 else -1.0
     n = (s * axis[0], s * axis[1], s * axis[2])
     eps = FEATURE * min(min(ha[0], ha[1], ha[2]), min(hb[0], hb[1], hb[2]))

@@ -19,7 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ..boxes import contact as contact_of_boxes
+from ..boxes import interference
 from ..boxes import scratch as box_scratch
 from ..boxes import separating_axis
 from . import spatial as sp
@@ -171,7 +171,9 @@ def _near_rows(P, box, R, p, near):
 def touching(P, R, p, near):
     """The rows of ``P.contact`` whose pairs may touch at poses
     (R, p): every other pair is apart, and :func:`pair_points` would find
-    no point of it.
+    no point of it; and for each, its axis of least overlap (m, 4): the
+    unit axis and the centre offset along it, m (:func:`boxes.separating_axis`,
+    for :func:`pair_points`).
 
     Of the pairs on the candidate list ``near`` (:func:`near_pairs`): those
     whose bodies have moved less than their slack since their last test are
@@ -186,6 +188,7 @@ def touching(P, R, p, near):
     rows = _near_rows(P, box, R, p, near)
     axes, moved, slack = near[3], near[6], near[7]
     out = np.empty(rows.shape[0], np.int64)
+    least = np.empty((rows.shape[0], 4))
     m = 0
     for r in rows:
         a, b = int(contact[r, 0]), int(contact[r, 1])
@@ -193,27 +196,30 @@ def touching(P, R, p, near):
             continue
         gap = _box_gap(contact, r, box)
         if not gap >= 0.0:  # NaN poses as well: the contact is left to find them
-            k, overlap = separating_axis(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], axes[r])
+            k, overlap, axis, along = separating_axis(R[a], p[a], contact[r, 2:5], R[b], p[b],
+                                                      contact[r, 5:8], axes[r])
             if k < 0:
                 out[m] = r
+                least[m, 0], least[m, 1], least[m, 2] = axis
+                least[m, 3] = along
                 m += 1
                 continue
             axes[r], gap = k, -overlap
         # apart by gap now, so by gap - (moved now + moved later) later
         slack[r] = gap - moved[a] - moved[b] - SLACK_ROUNDING
-    return out[:m]
+    return out[:m], least[:m]
 
 
 @njit(cache=True, **FLOAT_MATH)
-def pair_points(P, r, R, p, work):
+def pair_points(P, r, R, p, least, work):
     """Contact points of pair r of ``P.contact`` (:func:`boxes.contact`): their
     number and the normal from the pair's first body towards its second;
-    points, depths and weights are left in work; callers first skip the
-    pairs :func:`touching` rules out."""
+    points, depths and weights are left in work. For the pairs :func:`touching`
+    returns, with their axis of least overlap ``least`` (4,) from it."""
     contact = P.contact
     a, b = int(contact[r, 0]), int(contact[r, 1])
-    return contact_of_boxes(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8], work,
-                            contact[r, 12] != 0.0)
+    return interference(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8],
+                        (least[0], least[1], least[2]), least[3], work, contact[r, 12] != 0.0)
 
 
 @njit(cache=True, **FLOAT_MATH)
@@ -262,8 +268,10 @@ def panel_contacts(P, R, p, w, vo, f, near):
     points, depths, weights = work[-3], work[-2], work[-1]
     onset = near[8]
     onset[0], onset[1] = np.nan, 0.0
-    for r in touching(P, R, p, near):
-        count, normal = pair_points(P, r, R, p, work)
+    rows, least = touching(P, R, p, near)
+    for j in range(rows.shape[0]):
+        r = rows[j]
+        count, normal = pair_points(P, r, R, p, least[j], work)
         a, b = int(contact[r, 0]), int(contact[r, 1])
         mu, v_f = contact[r, 10], contact[r, 11]
         for q in range(count):

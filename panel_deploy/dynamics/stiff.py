@@ -41,8 +41,10 @@ def _pressed_points(P, R, p, near):
         return count, rows
     work = box_scratch()
     points, depths, weights = work[-3], work[-2], work[-1]
-    for r in touching(P, R, p, near):
-        found, normal = pair_points(P, r, R, p, work)
+    touched, least = touching(P, R, p, near)
+    for j in range(touched.shape[0]):
+        r = touched[j]
+        found, normal = pair_points(P, r, R, p, least[j], work)
         if count + found > rows.shape[0]:
             grown = np.empty((2 * rows.shape[0] + found, 9))
             grown[:count] = rows[:count]

@@ -293,44 +293,40 @@ def _plane(F, m, n, e1, e2, out, angle):
 def _covers(P, m, x, y, tol):
     """Whether the point (x, y) lies in the convex hull of P[:m] (2-d, ordered
     as :func:`_plane` leaves them), to within tol, m."""
-    # sqrt of the sum of squares, not math.hypot: hypot guards against an
-    # overflow these lengths (m) cannot reach, and took ~0.5 us of the ~2.8
-    # us of a face pressed on a face (its 64 calls)
     if m == 1:
         dx, dy = x - P[0, 0], y - P[0, 1]
         return dx * dx + dy * dy <= tol * tol
-    edges = 1 if m == 2 else m
-    for k in range(edges):
-        ax, ay = P[k, 0], P[k, 1]
-        bx, by = P[(k + 1) % m, 0], P[(k + 1) % m, 1]
-        length = math.sqrt((bx - ax) * (bx - ax) + (by - ay) * (by - ay))
+    if m == 2:
+        ax, ay = P[0, 0], P[0, 1]
+        ux, uy = P[1, 0] - ax, P[1, 1] - ay
+        length = math.sqrt(ux * ux + uy * uy)
         if length == 0.0:
-            continue
-        cross = ((bx - ax) * (y - ay) - (by - ay) * (x - ax)) / length
-        if m == 2:
-            along = ((bx - ax) * (x - ax) + (by - ay) * (y - ay)) / length
-            return abs(cross) <= tol and -tol <= along <= length + tol
-        if cross < -tol:
+            return True
+        cross = (ux * (y - ay) - uy * (x - ax)) / length
+        along = (ux * (x - ax) + uy * (y - ay)) / length
+        return abs(cross) <= tol and -tol <= along <= length + tol
+    # outside an edge by more than tol: cross < -tol |edge|, squared, so that
+    # no edge needs its length (a face pressed on a face tests 32 edges)
+    for k in range(m):
+        ax, ay = P[k, 0], P[k, 1]
+        ux, uy = P[(k + 1) % m, 0] - ax, P[(k + 1) % m, 1] - ay
+        cross = ux * (y - ay) - uy * (x - ax)
+        if cross < 0.0 and cross * cross > tol * tol * (ux * ux + uy * uy):
             return False
     return True
 
 
 @njit(cache=True)
-def _height(P, m, x, y):
+def _height(P, m, plane, x, y):
     """Height along the normal (m) of the feature P[:m] (ordered by
-    :func:`_plane`) over the point (x, y): its vertex, its edge's line
-    (nearest point), or its face's plane."""
+    :func:`_plane`) over the point (x, y): its vertex, its face's plane
+    ``plane`` (:func:`_affine_height` of P, taken once for all its points),
+    or where that is NaN (a face seen edge on) or m == 2 its edge's line
+    (nearest point)."""
     if m == 1:
         return P[0, 2]
-    if m >= 3:
-        ux, uy = P[1, 0] - P[0, 0], P[1, 1] - P[0, 1]
-        vx, vy = P[2, 0] - P[0, 0], P[2, 1] - P[0, 1]
-        det = ux * vy - uy * vx
-        if abs(det) > 1e-12 * (ux * ux + uy * uy + vx * vx + vy * vy):
-            dx, dy = x - P[0, 0], y - P[0, 1]
-            l1 = (dx * vy - dy * vx) / det
-            l2 = (ux * dy - uy * dx) / det
-            return P[0, 2] + l1 * (P[1, 2] - P[0, 2]) + l2 * (P[2, 2] - P[0, 2])
+    if m >= 3 and not math.isnan(plane[0]):
+        return plane[0] + plane[1] * x + plane[2] * y
     # an edge (or a face seen edge on): along the line through its first two points
     ux, uy = P[1, 0] - P[0, 0], P[1, 1] - P[0, 1]
     length2 = ux * ux + uy * uy
@@ -653,10 +649,12 @@ def interference(Ra, ca, ha, Rb, cb, hb, axis, along, work, pressure):
     _plane(Fa, ma, n, e1, e2, A, angle)
     _plane(Fb, mb, n, e1, e2, B, angle)
     found = _overlap_corners(A, ma, B, mb, COINCIDENT, eps, corners2)
+    plane_a = _affine_height(A) if ma >= 3 else (np.nan, np.nan, np.nan)
+    plane_b = _affine_height(B) if mb >= 3 else (np.nan, np.nan, np.nan)
     count = 0
     for q in range(found):
         x, y = corners2[q, 0], corners2[q, 1]
-        top, bottom = _height(A, ma, x, y), _height(B, mb, x, y)
+        top, bottom = _height(A, ma, plane_a, x, y), _height(B, mb, plane_b, x, y)
         if top - bottom <= 0.0:
             continue
         z = 0.5 * (top + bottom)

@@ -126,19 +126,17 @@ def least_overlap(Ra, ca, ha, Rb, cb, hb, stop_below=-np.inf):
 
 
 @njit(cache=True)
-def separating_axis(Ra, ca, ha, Rb, cb, hb, first, seen):
+def separating_axis(Ra, ca, ha, Rb, cb, hb, first):
     """A candidate axis of :func:`least_overlap` (0-14) along which boxes a and
     b (given as in :func:`separation`) do not overlap, trying ``first`` before
     the others: returns ``(k, overlap, axis, along)``, the axis and the overlap
     along it (m, <= 0) (and a zero axis and along), or if there is none k = -1
     and what :func:`least_overlap` returns (to rounding: the two are compiled
     apart, and their contractions into FMAs may differ): then, and only then,
-    the boxes interfere, and ``seen`` (15, 5) holds every candidate's overlap
-    (m; infinite for a skipped edge pair), unit axis and centre offset along
-    it (m), for :func:`shared_axes`, with no second pass over the 15. Moving
-    bodies keep their separating axis for many evaluations, so the axis that
-    separated a pair last time settles it at the cost of one axis in place of
-    up to 15."""
+    the boxes interfere, and :func:`interference` takes that axis of least
+    overlap from here, not from a second pass over the 15. Moving bodies keep
+    their separating axis for many evaluations, so the axis that separated a
+    pair last time settles it at the cost of one axis in place of up to 15."""
     overlap0 = axis_overlap(Ra, ca, ha, Rb, cb, hb, first)[0]
     if overlap0 <= 0.0:
         return first, overlap0, (0.0, 0.0, 0.0), 0.0
@@ -188,90 +186,9 @@ def separating_axis(Ra, ca, ha, Rb, cb, hb, first, seen):
         overlap = extent - abs(along)
         if overlap <= 0.0:
             return k, overlap, (0.0, 0.0, 0.0), 0.0
-        seen[k, 0], seen[k, 1], seen[k, 2], seen[k, 3], seen[k, 4] = overlap, u[0], u[1], u[2], along
         if overlap < best:
             best, axis, along_best = overlap, u, along
     return -1, best, axis, along_best
-
-
-#: Band of the axes that share a contact's push (:func:`shared_axes`), as a
-#: fraction of the least overlap: an axis overlapping up to twice as deep
-#: as the least has a share.
-SHARE_BAND = 1.0
-#: Sine of the angle between two edges below which their cross product's
-#: share fades (a smoothstep of the sine over this, :func:`shared_axes`): the
-#: product of near-parallel edges points anywhere about them, as the
-#: stowed stacks' coincident edges show.
-EDGE_SINE = 0.1
-#: Cosine of the angle within which axes that share a push push as one
-#: (:func:`shared_axes`): the normals of two faces pressed on each other
-#: and the products of their edges, the same direction to within the tilt.
-SAME_DIRECTION = math.cos(0.02)
-
-
-@njit(cache=True)
-def shared_axes(Ra, Rb, seen, least, out):
-    """The directions along which interfering boxes a and b (rotations Ra,
-    Rb (3, 3)) push, with each one's share of the push: written to rows of
-    out (15, 5), the unit direction (from a towards b), a centre offset of
-    1 (for :func:`interference`: the direction is turned already) and the
-    share; returns their number (0 for NaN overlaps).
-
-    Every candidate axis of :func:`separating_axis`'s ``seen`` whose overlap
-    is within SHARE_BAND times the least, ``least`` (m), has a share: ``1 - 3
-    x^2 + 2 x^3`` for an axis ``x SHARE_BAND least`` past the least (1 for
-    the least itself), times, for a product of edges, a smoothstep of their
-    sine over EDGE_SINE. Axes within SAME_DIRECTION of a direction before
-    them join it: it turns to the mean of their directions weighted by their
-    shares, and its share is the sum. The shares are scaled to sum to 1.
-
-    Pushing along the least-overlap axis alone, the push changed at once
-    where that axis passed from one candidate to another: by 90 degrees for
-    two panels of neighbouring stacks meeting edge on edge (their overlaps
-    across the two faces the same), by a few degrees for a panel sliding off
-    a row of others, and the points and depths along the two axes differ
-    there too. A step across such a jump errs by O(h) whatever its length,
-    so the integrator crawled onto each in steps shrinking to 1e-7 s (10 x 10,
-    issue 33). Shared, the push passes from one direction to the other as
-    their overlaps do."""
-    count = 0
-    total = 0.0
-    for k in range(15):
-        x = (seen[k, 0] - least) / (SHARE_BAND * least)
-        if not x < 1.0:
-            continue
-        share = 1.0 - x * x * (3.0 - 2.0 * x)
-        if k >= 6:
-            i, j = (k - 6) // 3, (k - 6) % 3
-            c = Ra[0, i] * Rb[0, j] + Ra[1, i] * Rb[1, j] + Ra[2, i] * Rb[2, j]
-            u = min(1.0, math.sqrt(max(0.0, 1.0 - c * c)) / EDGE_SINE)
-            share *= u * u * (3.0 - 2.0 * u)
-        if not share > 0.0:
-            continue
-        if seen[k, 4] < 0.0:
-            share = -share  # turned towards b: the sum below takes the sign
-        joined = count
-        for q in range(count):
-            norm = math.sqrt(out[q, 0] * out[q, 0] + out[q, 1] * out[q, 1] + out[q, 2] * out[q, 2])
-            if share * (out[q, 0] * seen[k, 1] + out[q, 1] * seen[k, 2] + out[q, 2] * seen[k, 3]) \
-                    >= SAME_DIRECTION * abs(share) * norm:
-                joined = q
-                break
-        if joined == count:
-            out[count, 0] = out[count, 1] = out[count, 2] = out[count, 4] = 0.0
-            out[count, 3] = 1.0
-            count += 1
-        out[joined, 0] += share * seen[k, 1]
-        out[joined, 1] += share * seen[k, 2]
-        out[joined, 2] += share * seen[k, 3]
-        out[joined, 4] += abs(share)
-        total += abs(share)
-    for q in range(count):
-        norm = math.sqrt(out[q, 0] * out[q, 0] + out[q, 1] * out[q, 1] + out[q, 2] * out[q, 2])
-        for m in range(3):
-            out[q, m] /= norm
-        out[q, 4] /= total
-    return count
 
 
 @njit(cache=True)

@@ -224,8 +224,7 @@ def test_a_separating_axis_exists_exactly_when_the_boxes_are_apart():
         overlap = least_overlap(Ra, ca, ha, Rb, cb, hb)[0]
         ref = reference_signed_distance(ha, Ra, ca, hb, Rb, cb)
         for first in (0, 5, 14, int(rng.integers(15))):
-            axis, overlap_axis, least_axis, least_along = separating_axis(Ra, ca, ha, Rb, cb, hb, first,
-                                                                              np.empty((15, 5)))
+            axis, overlap_axis, least_axis, least_along = separating_axis(Ra, ca, ha, Rb, cb, hb, first)
             assert (axis >= 0) == (overlap <= 0.0) == (ref > 0.0), (k, first, overlap, ref)
             if axis >= 0:
                 # the returned axis alone separates: the projections on it do not overlap

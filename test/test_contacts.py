@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from panel_deploy.boxes import (FACE_POINTS, FEATURE, contact, corners, least_overlap, scratch,
-                                separating_axis, shared_axes)
+from panel_deploy.boxes import FACE_POINTS, FEATURE, contact, corners, least_overlap, scratch
 from panel_deploy.build import build_model
 from panel_deploy.collision import check_trajectory
 from panel_deploy.collision.geometry import box_signed_distance
@@ -240,67 +239,6 @@ def test_near_coplanar_side_faces_press_once_whichever_face_the_axis_takes():
         pushes.append(pushed(Ra, ca, HALF, Rb, cb, HALF, 1e7))
     assert min(pushes) > 0.0
     assert max(pushes) / min(pushes) < 1.01
-
-
-def edge_on_edge(o_y, o_z, Rb=np.eye(3)):
-    """b beside a along +y and a thickness up along +z, its edge pressed on
-    a's by o_y and o_z (m) across the two faces: two panels of neighbouring
-    stowed stacks (10 x 10, issue 33)."""
-    return Rb, np.array([0.0, 2 * HALF[1] - o_y, 2 * HALF[2] - o_z])
-
-
-def test_an_edge_pressed_on_an_edge_pushes_along_both_faces_by_shares():
-    """The overlaps across the side faces (1 um) and across the top and bottom
-    faces (1.5 um): both directions push, shares 1 and 1 - 3 x^2 + 2 x^3 =
-    1/2 at x = 0.5 (half the band past the least), scaled to 2/3 and 1/3;
-    the two faces' normals and the products of crossing edges along each
-    push as one. At 2.5 um (past the band) the side alone pushes."""
-    seen, out = np.empty((15, 5)), np.empty((15, 5))
-    for o_z, expected in ((1.5e-6, {(0, 1, 0): 2 / 3, (0, 0, 1): 1 / 3}), (2.5e-6, {(0, 1, 0): 1.0})):
-        Rb, cb = edge_on_edge(1e-6, o_z)
-        k, least, _, _ = separating_axis(np.eye(3), np.zeros(3), HALF, Rb, cb, HALF, 0, seen)
-        assert k == -1 and least == pytest.approx(1e-6, rel=1e-9)
-        count = shared_axes(np.eye(3), Rb, seen, least, out)
-        found = {tuple(int(round(x)) for x in row[:3]): row[4] for row in out[:count]}
-        assert found.keys() == expected.keys()
-        for direction, share in expected.items():
-            assert found[direction] == pytest.approx(share, rel=1e-9)
-        assert np.allclose(np.abs(out[:count, :3]).max(axis=1), 1.0, atol=1e-12)  # the faces' normals
-
-
-def test_an_edge_pressed_on_an_edge_pushes_continuously_through_the_least_overlap_switch():
-    """Edge on edge, turned by microradians, the overlap across the top faces
-    slid from half to one and a half times that across the sides: the least-
-    overlap axis passes from the top faces' normal to the sides'. The
-    dynamics' push (:func:`panel_contact.panel_contacts`, k_p 1e7 N/m) changes
-    between neighbouring poses less and less with the spacing; pushed along
-    the least-overlap axis alone (:func:`boxes.contact`) it turned by 90
-    degrees at once, a 0.27 N jump at any spacing, onto which the
-    integrator crawled in the stowed stacks of 10 x 10."""
-    model = resting_panel(1e7, 0.0, 1.0)
-    P = pack(model)
-    n, (a, b) = P.n, P.contact[0, :2].astype(int)
-    Rb = Rotation.from_rotvec([2e-6, 0.0, 1e-6]).as_matrix()
-
-    def shared(o_z):
-        R, p = np.empty((n + 1, 3, 3)), np.empty((n + 1, 3))
-        R[a], p[a] = np.eye(3), np.zeros(3)
-        R[b], p[b] = edge_on_edge(1e-6, o_z, Rb)
-        f = np.zeros((n + 1, 6))
-        panel_contact.panel_contacts(P, R, p, np.zeros((n + 1, 3)), np.zeros((n + 1, 3)), f, new_list(P))
-        return -f[b, 3:]  # f holds minus the force on b
-
-    def least_only(o_z):
-        work = scratch()
-        count, normal = contact(np.eye(3), np.zeros(3), HALF, *edge_on_edge(1e-6, o_z, Rb), HALF, work)
-        push = sum(panel_contact.contact_law(d, 0.0, w * 1e7, 0.0)[0] for d, w in zip(work[-2][:count], work[-1][:count]))
-        return push * np.array(normal)
-
-    for push, shrinks in ((shared, True), (least_only, False)):
-        steps = [np.abs(np.diff([push(o_z) for o_z in np.linspace(0.5e-6, 1.5e-6, m)], axis=0)).max()
-                 for m in (101, 1001)]
-        assert (steps[1] < 0.2 * steps[0]) == shrinks, (push.__name__, steps)
-    assert shared(1e-6)[1] > 0.1 and shared(1e-6)[2] > 0.1  # pressing along both faces (N)
 
 
 def paper_model(*sets):

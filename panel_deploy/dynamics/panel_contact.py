@@ -19,8 +19,9 @@ import math
 import numpy as np
 from numba import njit
 
-from ..boxes import interference, separating_axis, shared_axes
+from ..boxes import interference
 from ..boxes import scratch as box_scratch
+from ..boxes import separating_axis
 from . import spatial as sp
 from ._jit import FLOAT_MATH
 
@@ -168,11 +169,11 @@ def _near_rows(P, box, R, p, near):
 
 @njit(cache=True, **FLOAT_MATH)
 def touching(P, R, p, near):
-    """The rows of ``P.contact`` whose pairs may touch at poses (R, p), each
-    once per direction it pushes along (:func:`boxes.shared_axes`): every
-    other pair is apart, and :func:`pair_points` would find no point of it;
-    and for each, that direction (e, 5): the unit axis, the centre offset
-    along it and its share of the pair's push, for :func:`pair_points`.
+    """The rows of ``P.contact`` whose pairs may touch at poses
+    (R, p): every other pair is apart, and :func:`pair_points` would find
+    no point of it; and for each, its axis of least overlap (m, 4): the
+    unit axis and the centre offset along it, m (:func:`boxes.separating_axis`,
+    for :func:`pair_points`).
 
     Of the pairs on the candidate list ``near`` (:func:`near_pairs`): those
     whose bodies have moved less than their slack since their last test are
@@ -186,9 +187,8 @@ def touching(P, R, p, near):
     box = _boxes(P, R, p)
     rows = _near_rows(P, box, R, p, near)
     axes, moved, slack = near[3], near[6], near[7]
-    out = np.empty(rows.shape[0] + 15, np.int64)
-    shared = np.empty((rows.shape[0] + 15, 5))
-    seen = np.empty((15, 5))
+    out = np.empty(rows.shape[0], np.int64)
+    least = np.empty((rows.shape[0], 4))
     m = 0
     for r in rows:
         a, b = int(contact[r, 0]), int(contact[r, 1])
@@ -197,45 +197,29 @@ def touching(P, R, p, near):
         gap = _box_gap(contact, r, box)
         if not gap >= 0.0:  # NaN poses as well: the contact is left to find them
             k, overlap, axis, along = separating_axis(R[a], p[a], contact[r, 2:5], R[b], p[b],
-                                                      contact[r, 5:8], axes[r], seen)
+                                                      contact[r, 5:8], axes[r])
             if k < 0:
-                if m + 15 > out.shape[0]:
-                    out, shared = _grown(out, shared, m)
-                count = shared_axes(R[a], R[b], seen, overlap, shared[m:])
-                if count == 0:  # NaN overlaps: the least axis, which passes them on
-                    shared[m, 0], shared[m, 1], shared[m, 2] = axis
-                    shared[m, 3], shared[m, 4] = along, 1.0
-                    count = 1
-                out[m:m + count] = r
-                m += count
+                out[m] = r
+                least[m, 0], least[m, 1], least[m, 2] = axis
+                least[m, 3] = along
+                m += 1
                 continue
             axes[r], gap = k, -overlap
         # apart by gap now, so by gap - (moved now + moved later) later
         slack[r] = gap - moved[a] - moved[b] - SLACK_ROUNDING
-    return out[:m], shared[:m]
+    return out[:m], least[:m]
 
 
 @njit(cache=True, **FLOAT_MATH)
-def _grown(out, shared, m):
-    """:func:`touching`'s two arrays, twice as long, their first m rows kept."""
-    out2 = np.empty(2 * out.shape[0], np.int64)
-    shared2 = np.empty((2 * out.shape[0], 5))
-    out2[:m] = out[:m]
-    shared2[:m] = shared[:m]
-    return out2, shared2
-
-
-@njit(cache=True, **FLOAT_MATH)
-def pair_points(P, r, R, p, axis, work):
-    """Contact points of pair r of ``P.contact`` along one direction ``axis``
-    (5,) that :func:`touching` returns for it (:func:`boxes.interference`):
-    their number and the normal from the pair's first body towards its
-    second; points, depths and weights are left in work (the weights not
-    yet scaled by the direction's share, ``axis[4]``)."""
+def pair_points(P, r, R, p, least, work):
+    """Contact points of pair r of ``P.contact`` (:func:`boxes.contact`): their
+    number and the normal from the pair's first body towards its second;
+    points, depths and weights are left in work. For the pairs :func:`touching`
+    returns, with their axis of least overlap ``least`` (4,) from it."""
     contact = P.contact
     a, b = int(contact[r, 0]), int(contact[r, 1])
     return interference(R[a], p[a], contact[r, 2:5], R[b], p[b], contact[r, 5:8],
-                        (axis[0], axis[1], axis[2]), axis[3], work, contact[r, 12] != 0.0)
+                        (least[0], least[1], least[2]), least[3], work, contact[r, 12] != 0.0)
 
 
 @njit(cache=True, **FLOAT_MATH)
@@ -248,10 +232,7 @@ def panel_contacts(P, R, p, w, vo, f, near):
     :func:`panel_deploy.boxes.contact`) at depth d > 0, approaching at s (the
     normal speed of the pair's first body's point there relative to the
     second's), a push ``max(0, k d + c s)`` along the normal on the two
-    bodies, k and c its weight's share of k_p and c_p, times the share of the
-    direction it was found along (:func:`touching`: a pair whose overlaps
-    along two directions are alike pushes along both, by shares that pass
-    from one to the other as the overlaps do): a spring and damper that never
+    bodies, k and c its weight's share of k_p and c_p: a spring and damper that never
     pulls (one that pulled would glue parting panels together), both coming
     in over the first ``CONTACT_RAMP`` of depth (:func:`contact_law`). The
     spring takes the power spring s and stores its energy; the rest of the
@@ -287,13 +268,12 @@ def panel_contacts(P, R, p, w, vo, f, near):
     points, depths, weights = work[-3], work[-2], work[-1]
     onset = near[8]
     onset[0], onset[1] = np.nan, 0.0
-    rows, shared = touching(P, R, p, near)
+    rows, least = touching(P, R, p, near)
     for j in range(rows.shape[0]):
         r = rows[j]
-        count, normal = pair_points(P, r, R, p, shared[j], work)
+        count, normal = pair_points(P, r, R, p, least[j], work)
         a, b = int(contact[r, 0]), int(contact[r, 1])
         mu, v_f = contact[r, 10], contact[r, 11]
-        share = shared[j, 4]
         for q in range(count):
             depth = depths[q]
             x = (points[q, 0], points[q, 1], points[q, 2])
@@ -303,8 +283,8 @@ def panel_contacts(P, R, p, w, vo, f, near):
                 onset[1], onset[2] = speed, r
                 onset[3], onset[4], onset[5] = x
                 onset[6], onset[7], onset[8] = normal
-            push, spring, e, _, _ = contact_law(depth, speed, share * weights[q] * contact[r, 8],
-                                                 share * weights[q] * contact[r, 9])
+            push, spring, e, _, _ = contact_law(depth, speed, weights[q] * contact[r, 8],
+                                                 weights[q] * contact[r, 9])
             energy += e
             spring_power += spring * speed
             power += (push - spring) * speed

@@ -32,8 +32,7 @@ def _outer_add(out, scale, u):
 @njit(cache=True, **FLOAT_MATH)
 def _pressed_points(P, R, p, near):
     """The panel contact points pressed (depth > 0) at poses (R, p): (count,
-    rows), row i < count ``[pair, normal (3), point (3, m), depth (m), weight]``
-    (the weight scaled by its direction's share, :func:`.panel_contact.touching`),
+    rows), row i < count ``[pair, normal (3), point (3, m), depth (m), weight]``,
     so that the separating axes run once a call, not once to count and again
     to fill. ``near``: the run's candidate list (:func:`.panel_contact.near_pairs`)."""
     rows = np.empty((64, 9))
@@ -42,10 +41,10 @@ def _pressed_points(P, R, p, near):
         return count, rows
     work = box_scratch()
     points, depths, weights = work[-3], work[-2], work[-1]
-    touched, shared = touching(P, R, p, near)
+    touched, least = touching(P, R, p, near)
     for j in range(touched.shape[0]):
         r = touched[j]
-        found, normal = pair_points(P, r, R, p, shared[j], work)
+        found, normal = pair_points(P, r, R, p, least[j], work)
         if count + found > rows.shape[0]:
             grown = np.empty((2 * rows.shape[0] + found, 9))
             grown[:count] = rows[:count]
@@ -54,7 +53,7 @@ def _pressed_points(P, R, p, near):
             rows[count, 0] = r
             rows[count, 1], rows[count, 2], rows[count, 3] = normal
             rows[count, 4], rows[count, 5], rows[count, 6] = points[q, 0], points[q, 1], points[q, 2]
-            rows[count, 7], rows[count, 8] = depths[q], shared[j, 4] * weights[q]
+            rows[count, 7], rows[count, 8] = depths[q], weights[q]
             count += 1
     return count, rows
 

@@ -131,8 +131,9 @@ def separating_axis(Ra, ca, ha, Rb, cb, hb, first):
     b (given as in :func:`separation`) do not overlap, trying ``first`` before
     the others: returns ``(k, overlap, axis, along)``, the axis and the overlap
     along it (m, <= 0) (and a zero axis and along), or if there is none k = -1
-    and what :func:`least_overlap` returns (to rounding: the two are compiled
-    apart, and their contractions into FMAs may differ): then, and only then,
+    and what :func:`least_overlap` returns (to rounding: here the axes of a
+    pair that interferes come from b's rotation in a's frame, there from
+    :func:`axis_overlap`'s dot products): then, and only then,
     the boxes interfere, and :func:`interference` takes that axis of least
     overlap from here, not from a second pass over the 15. Moving bodies keep
     their separating axis for many evaluations, so the axis that separated a

@@ -4,7 +4,11 @@ Every body is one box: rotation R (3, 3), centre c (3,) and half edges h (3,),
 ground frame, m. The separating-axis test here gives the collision check its
 exact penetration depths (:mod:`panel_deploy.collision.geometry`) and the
 panel contacts of the dynamics their depth and normal; :func:`contact`
-adds where the contact acts. Plain numba functions, callable from both.
+adds where the contact acts. Plain numba functions, callable from both;
+those a contact evaluation calls for every touching pair are
+``inline='always'``, so that numba's reference counts of their array
+arguments do not cost a dozen calls' atomic operations a pair (see
+:mod:`panel_deploy.dynamics._jit`).
 """
 
 from __future__ import annotations
@@ -43,7 +47,7 @@ def corners(R, c, h):
     return corners_into(R, c, h, np.empty((8, 3)))
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def corners_into(R, c, h, out):
     """:func:`corners`, written to out (8, 3) and returned."""
     for k in range(8):
@@ -125,7 +129,7 @@ def least_overlap(Ra, ca, ha, Rb, cb, hb, stop_below=-np.inf):
     return best, axis, along_best
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def separating_axis(Ra, ca, ha, Rb, cb, hb, first):
     """A candidate axis of :func:`least_overlap` (0-14) along which boxes a and
     b (given as in :func:`separation`) do not overlap, trying ``first`` before
@@ -192,7 +196,7 @@ def separating_axis(Ra, ca, ha, Rb, cb, hb, first):
     return -1, best, axis, along_best
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _feature(V, n, sign, eps, out):
     """Write to out the corners of V (8, 3) within eps of the largest sign * (n . v);
     returns their number and that extreme, m."""
@@ -221,7 +225,7 @@ def _pseudo_angle(x, y):
     return y / s if x >= 0.0 else -2.0 - y / s
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _plane(F, m, n, e1, e2, out, angle):
     """The m points F in the contact frame, written to out (m, 3): coordinates
     along e1, e2, then the height along n; ordered counter-clockwise around
@@ -244,7 +248,7 @@ def _plane(F, m, n, e1, e2, out, angle):
             j -= 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _covers(P, m, x, y, tol):
     """Whether the point (x, y) lies in the convex hull of P[:m] (2-d, ordered
     as :func:`_plane` leaves them), to within tol, m."""
@@ -271,7 +275,7 @@ def _covers(P, m, x, y, tol):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _height(P, m, plane, x, y):
     """Height along the normal (m) of the feature P[:m] (ordered by
     :func:`_plane`) over the point (x, y): its vertex, its face's plane
@@ -289,7 +293,7 @@ def _height(P, m, plane, x, y):
     return P[0, 2] + t * (P[1, 2] - P[0, 2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _add_point(out, count, x, y, band):
     """Append the point (x, y) to out[:count] and return the new count; its
     part of a point's share in out[count, 2]: 3 u^2 - 2 u^3 (a smoothstep),
@@ -309,7 +313,7 @@ def _add_point(out, count, x, y, band):
     return count + 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _overlap_corners(A, ma, B, mb, on, band, out):
     """Corners of the intersection of the convex hulls of A[:ma] and B[:mb]
     (2-d, their first two columns), written to out (its first two columns,
@@ -384,7 +388,7 @@ def _area(P, m):
     return 0.5 * twice
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _affine_height(P):
     """(h0, hx, hy): the plane h = h0 + hx x + hy y through the first three
     points of P (x, y, height); NaNs where they are in line (a face seen
@@ -583,7 +587,7 @@ def contact(Ra, ca, ha, Rb, cb, hb, work, pressure=False):
     return interference(Ra, ca, ha, Rb, cb, hb, axis, along, work, pressure)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def interference(Ra, ca, ha, Rb, cb, hb, axis, along, work, pressure):
     """:func:`contact` of boxes that interfere, given their axis of least
     overlap (a unit 3-tuple) and the centre offset along it, m (both as

@@ -130,7 +130,7 @@ def body_drag(air, R, i, v, w):
     return sp.scale(n, -q * I0), torque, q * (v0 * I0 + a * Is + b * Ir)
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def air_drag(P, R, p, w, vo, f):
     """Subtract the air drag wrench of every body from its row of f (n + 1, 6),
     the bias wrenches about the ground origin; returns the power dissipated, W

@@ -39,7 +39,7 @@ def applies(n):
     return n >= MIN_N
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def inertias(P, Jb, hb):
     """Spatial inertias ``[[J, [h]x], [-[h]x, m 1]]`` (n, 6, 6) about the ground
     origin from the angular inertias J (n, 3, 3, kg m^2) and first moments
@@ -74,7 +74,7 @@ PACKED[np.triu_indices(6)] = np.arange(21)
 PACKED.T[np.triu_indices(6)] = np.arange(21)
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def factor(P, S, Jb, hb, armature):
     """Factor ``H = M + diag(armature)`` (armature (n,), kg m^2) by the
     articulated-body inertias, leaves first, from the bodies' angular
@@ -130,7 +130,7 @@ def factor(P, S, Jb, hb, armature):
     return U, D, True
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def solve(P, S, U, D, tau, out, work):
     """Write ``H^-1 tau`` to out (n,) from :func:`factor`'s (U, D); work is
     (n + 1, 6) scratch. tau (n,) is not changed and may not be out."""
@@ -138,7 +138,7 @@ def solve(P, S, U, D, tau, out, work):
     solve_rows(P, S, U, D, tau.reshape((1, n)), out.reshape((1, n)), work.reshape((1, n + 1, 6)))
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def solve_rows(P, S, U, D, T, out, work):
     """Write ``(H^-1 T^T)^T`` to out (m, n): :func:`solve` of each row of T
     (m, n) in one pass over the tree, each row's arithmetic as solve's
@@ -148,7 +148,7 @@ def solve_rows(P, S, U, D, T, out, work):
     down_rows(P, S, U, D, out, work)
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def up_rows(P, S, U, D, T, out, work):
     """The pass up the tree of :func:`solve_rows`: write to out (m, n) the
     innovations ``e = L^-1 t`` of each row t of T (m, n), where ``H = L
@@ -174,7 +174,7 @@ def up_rows(P, S, U, D, T, out, work):
                     work[r, a, k] += work[r, i, k] + U[i, k] * c
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def down_rows(P, S, U, D, out, work):
     """The pass down the tree of :func:`solve_rows`: overwrite the innovations
     in out (m, n) (:func:`up_rows`) with ``H^-1 t`` of their rows t.
@@ -195,7 +195,7 @@ def down_rows(P, S, U, D, out, work):
                 work[r, i, k] = work[r, a, k] + S[i, k] * x
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def times(P, S, I6, x, out, work):
     """Write ``M x`` to out (n,): body accelerations ``a_i = a_parent + S_i
     x_i`` down the tree, their inertia forces summed up it and projected on the

@@ -22,7 +22,7 @@ from .hinges import hinge_law
 from .pack import PENALTY
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def cut_angle(P, j, R):
     """Cut-hinge angle (rad, continuous on (-pi/2, 3pi/2]) and its exact rate axis g (3-tuple).
 
@@ -44,7 +44,7 @@ def cut_angle(P, j, R):
     return theta, (g[0] / d, g[1] / d, g[2] / d)
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def cut_ends(P, j, R, p):
     """Ends (M_a, N_a, M_b, N_b) of cut hinge j as carried by its bodies a and b, m."""
     M = sp.get(P.cut_point, j)
@@ -65,7 +65,7 @@ def largest_gap(P, R, p):
     return out
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def cut_forces(P, R, p, w, vo):
     """Wrenches of the cut hinges on their bodies, with energy and damper power.
 
@@ -117,7 +117,7 @@ def cut_forces(P, R, p, w, vo):
     return F, energy, power
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def closure_jacobian(P, R, p, w, vo, S, acc):
     """Exact-closure constraints of Eq. (5) kept as equalities.
 
@@ -236,7 +236,7 @@ def constraint_factor(L, J, regularisation):
     return Y, LA, ok
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def articulated_closure(P, S, UA, D, Q, c, J, gamma, omega, qdd):
     """Write to qdd (n,) the exact closure's joint accelerations
     (:func:`exact_closure`'s) with M factored by the articulated-body

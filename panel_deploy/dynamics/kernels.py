@@ -58,7 +58,7 @@ def state_vector(theta, omega):
     return np.concatenate([theta, omega, np.zeros(ACCUMULATORS)])
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def kinematics(P, theta, omega):
     """Poses, velocities and joint screws of every body.
 

@@ -51,7 +51,7 @@ def contact_law(depth, speed, k, c):
     return max(0.0, spring + damping * speed), spring, energy, stiffness, damping
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def _boxes(P, R, p):
     """The axis-aligned box around every body at poses (R, p): (n + 1, 2, 3),
     its lower and upper corners (m), once per call for :func:`_pair_apart`."""
@@ -127,7 +127,7 @@ def near_pairs(P):
 SLACK_ROUNDING = 1e-9
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def _near_rows(P, box, R, p, near):
     """The rows of ``P.contact`` whose :func:`_boxes` ``box`` may overlap, from
     the candidate list ``near`` (:func:`near_pairs`), rebuilt first if a box
@@ -167,7 +167,7 @@ def _near_rows(P, box, R, p, near):
     return rows[:count[0]]
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def touching(P, R, p, near):
     """The rows of ``P.contact`` whose pairs may touch at poses
     (R, p): every other pair is apart, and :func:`pair_points` would find
@@ -210,7 +210,7 @@ def touching(P, R, p, near):
     return out[:m], least[:m]
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def pair_points(P, r, R, p, least, work):
     """Contact points of pair r of ``P.contact`` (:func:`boxes.contact`): their
     number and the normal from the pair's first body towards its second;
@@ -222,7 +222,7 @@ def pair_points(P, r, R, p, least, work):
                         (least[0], least[1], least[2]), least[3], work, contact[r, 12] != 0.0)
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def panel_contacts(P, R, p, w, vo, f, near):
     """Subtract the panel-contact wrenches from f (n + 1, 6), the bias wrenches
     about the ground origin; returns the contact energy (J), the power its

@@ -106,7 +106,7 @@ def rotation(axis, angle):
             (z * x * C - y * s, z * y * C + x * s, c + z * z * C))
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def carried(P, R, p, b, x):
     """Current position (m) of body b's material point that sits at x in the flat state."""
     return add(get(p, b), rotate(R, b, sub(x, get(P.r0, b))))
@@ -123,7 +123,7 @@ def point_velocity(w, vo, b, x):
 # [-[h]x, m 1]] with J = R I R^T - m [c]x^2 and h = m c; a composite body is
 # the sum, so (J, h, m) describe both without 6 x 6 matrices.
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def angular_inertia(P, R, p, i, out):
     """Write J of body i (kg m^2, see above) to out[i] (k, 3, 3)."""
     m = P.mass[i]
@@ -160,7 +160,7 @@ def dot6(A, i, fw, fv):
             + A[i, 3] * fv[0] + A[i, 4] * fv[1] + A[i, 5] * fv[2])
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def point_jacobian(P, S, b, x, out, row, sign):
     """Add ``sign`` times d(velocity of body b's material point at x)/d omega
     to out[row:row + 3] (k, n)."""
@@ -171,7 +171,7 @@ def point_jacobian(P, S, b, x, out, row, sign):
         b = P.parent[b]
 
 
-@njit(cache=True, **FLOAT_MATH)
+@njit(cache=True, inline="always", **FLOAT_MATH)
 def angular_jacobian(P, S, b, out, row, sign):
     """Add ``sign`` times d(angular velocity of body b)/d omega to out[row:row + 3] (k, n)."""
     while b < P.n:

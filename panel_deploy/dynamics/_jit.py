@@ -15,14 +15,17 @@
   instead of a check before every division that raises ZeroDivisionError
   (3 % of an evaluation).
 
-The kernels that the right-hand side calls and that take arrays, the packed
-model (:class:`.pack.Packed`, 24 arrays) above all, are ``inline="always"``
-(the tree's passes, the closure's, the panel contacts' and their boxes'
-geometry in :mod:`panel_deploy.boxes`): at every call that LLVM does not
-inline, numba increments and decrements the reference count of each array
-argument, two atomic operations an array, and LLVM inlines only small
-callees. numba's own inlining puts the callee's body in the caller's, where
-numba's reference-count pruning removes them. Measured with perf on 10 x 10
+The kernels that the right-hand side and the structured Rosenbrock step
+call and that take arrays, the packed model (:class:`.pack.Packed`, 24
+arrays) above all, are ``inline="always"`` (the tree's passes, the
+closure's, the panel contacts' and their boxes' geometry in
+:mod:`panel_deploy.boxes`): at every call that LLVM does not inline, numba
+increments and decrements the reference count of each array argument, two
+atomic operations an array, and LLVM inlines only small callees. numba's own
+inlining puts the callee's body in the caller's, where numba's
+reference-count pruning removes most of them; not those of an inlined
+kernel's arguments where it allocates an array between the two (an
+allocation is a call the pruning does not look through). Measured with perf on 10 x 10
 circuit 8 (exact closure, 0-0.2 s): ``NRT_incref`` and ``NRT_decref`` took
 14 % of the run and 23 % of an evaluation in the stowed stacks, where each
 touching pair's geometry made a dozen calls. With the inlining the window

@@ -11,6 +11,9 @@ from pathlib import Path
 import pytest
 from ros_harness import Client, NodeProcess
 
+from rclpy.task import Future
+
+from panel_deploy import contract
 from panel_deploy.collision import CollisionSettings, check_trajectory
 from panel_deploy.dynamics import simulate
 from panel_deploy.configure import DynamicsParameters, configure
@@ -57,14 +60,14 @@ def test_run_finds_an_impact_the_panel_contact_absorbed(compiled_nodes):
     assert first["v"] == pytest.approx(report.first_collision.normal_speed, rel=1e-12)
 
 
-def test_the_driver_drives_nodes_in_processes_of_their_own(compiled_nodes):
-    """run's driver knows the nodes by their topics and services only."""
-    ns = "/separate"
+def _drive_separate_nodes(ns, patch=lambda driver: None):
+    """run's driver (patched by ``patch``) driving the nodes in processes of their own."""
     procs = [NodeProcess("array_model", "scene:=paper_4x4", namespace=ns),
              NodeProcess("dynamics", "t_end:=0.6", "real_time_factor:=0.0", namespace=ns),
              NodeProcess("collision_monitor", "max_lag:=0.0", namespace=ns)]
     client = Client("driver_test")
     driver = load("graph").Driver(threading.Event(), context=client.context, namespace=ns)
+    patch(driver)
     client.executor.add_node(driver)
     try:
         driver.drive(optimise=False)
@@ -79,6 +82,34 @@ def test_the_driver_drives_nodes_in_processes_of_their_own(compiled_nodes):
     assert driver.exit_code == 1 and s["t_end"] == pytest.approx(0.6)
     assert first["pair"] == ["r1c2+r1c3", "r2c2+r2c3"] and 0.41 <= first["t"] <= 0.42
     assert s["collision"]["samples_checked"] == 121 and s["collision"]["d"] == pytest.approx(0.0454, abs=1e-3)
+
+
+def test_the_driver_drives_nodes_in_processes_of_their_own(compiled_nodes):
+    """run's driver knows the nodes by their topics and services only."""
+    _drive_separate_nodes("/separate")
+
+
+def test_a_goal_whose_answer_is_lost_is_followed_by_its_id(compiled_nodes, monkeypatch):
+    """A goal the server runs although its answer never reaches the driver (as
+    under load, while discovery is under way) is asked for by its id: the
+    request reaches the server only 1.5 s after it was sent, so the first asks
+    are answered UNKNOWN, and the deployment is followed to its end (one
+    deployment: the monitor checked its 121 samples)."""
+    graph = load("graph")
+    monkeypatch.setattr(graph, "ACCEPT_WAIT", 0.5)
+    sent = []
+
+    def lose_answers(driver):
+        client = driver.actions[contract.DEPLOY]
+        send = client.send_goal_async
+
+        def late(*args, **kwargs):
+            sent.append(threading.Timer(1.5, send, args, kwargs))
+            sent[-1].start()
+            return Future()  # never answered
+        monkeypatch.setattr(client, "send_goal_async", late)
+    _drive_separate_nodes("/lost", lose_answers)
+    assert sent and all(not timer.is_alive() for timer in sent)
 
 
 def test_run_optimise_then_deploys_flat_without_collision(compiled_nodes):

@@ -12,14 +12,18 @@ import sys
 import tempfile
 import threading
 import time
+import uuid
 from pathlib import Path
 
 import rclpy
+from action_msgs.msg import GoalStatus
 from rclpy.action import ActionClient
+from rclpy.action.client import ClientGoalHandle
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.validate_namespace import validate_namespace
+from unique_identifier_msgs.msg import UUID
 
 from .. import contract
 from ..errors import SceneError, shown
@@ -35,6 +39,8 @@ from .recorder import RecorderNode
 #: Seconds to wait for a service, for the model to reach every node, or for
 #: the monitor to catch up.
 TIMEOUT = 30.0
+#: Seconds to wait for a goal's acceptance before asking for the goal by its id.
+ACCEPT_WAIT = 5.0
 
 
 class Driver(Node):
@@ -68,15 +74,45 @@ class Driver(Node):
             raise RuntimeError(f"{action.path}: no such action server")
         end = time.monotonic() + TIMEOUT
         while True:
-            sent = self._future(client.send_goal_async(
-                messages.message_class(action.type).Goal(**goal), feedback_callback=feedback))
-            self.goal = sent.result()
+            self.goal = self._send(action, goal, feedback)
             if not self.goal.accepted:
                 raise RuntimeError(f"{action.path}: goal rejected")
             result = self._future(self.goal.get_result_async(), timeout=1e9).result().result
             if result.success or "no model" not in result.message or time.monotonic() > end:
                 return result
             time.sleep(0.05)
+
+    def _send(self, action: contract.Service, goal: dict, feedback) -> ClientGoalHandle:
+        """Send ``action`` a goal of fields ``goal``; its handle once the
+        server has it.
+
+        While discovery is under way (a node process of its own, a loaded
+        machine) the server can receive a goal and run it, yet its answer be
+        lost: Fast DDS waits 100 ms for the client's response reader to match,
+        then drops the answer. After ACCEPT_WAIT s without one, the goal is
+        asked for by its id: the get-result service answers UNKNOWN at once for
+        a goal the server has not got yet (asked again, up to TIMEOUT) and
+        answers with the result for one it has, so a goal that runs is
+        followed, never sent twice.
+        """
+        client, action_type = self.actions[action], messages.message_class(action.type)
+        goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        sent = client.send_goal_async(action_type.Goal(**goal), feedback_callback=feedback,
+                                      goal_uuid=goal_id)
+        if self._wait(sent.done, "an answer", ACCEPT_WAIT, required=False):
+            return sent.result()
+        self.goal = ClientGoalHandle(client, goal_id,
+                                     action_type.Impl.SendGoalService.Response(accepted=True))
+        end = time.monotonic() + TIMEOUT
+        while not sent.done():
+            asked = self.goal.get_result_async()
+            self._wait(lambda: sent.done() or asked.done(), "the goal's result", 1e9)
+            if asked.done() and asked.result().status != GoalStatus.STATUS_UNKNOWN:
+                return self.goal
+            if time.monotonic() > end:
+                raise RuntimeError(f"timed out waiting for an answer from {action.path}")
+            time.sleep(0.1)
+        return sent.result()
 
     def _future(self, future, timeout=TIMEOUT):
         done = threading.Event()
@@ -112,15 +148,17 @@ class Driver(Node):
               f"{'-' if d is None else f'{d * 1e3:.2f} mm'}  "
               f"collisions {len(self.events)}", file=sys.stderr, flush=True)
 
-    def _wait(self, condition, what, timeout=TIMEOUT, interruptible=True) -> bool:
+    def _wait(self, condition, what, timeout=TIMEOUT, interruptible=True,
+              required=True) -> bool:
         """Until ``condition()``; KeyboardInterrupt on an interrupt (if
-        ``interruptible``), RuntimeError after ``timeout`` s (else False)."""
+        ``interruptible``); after ``timeout`` s RuntimeError (if ``required``,
+        else False)."""
         end = time.monotonic() + timeout
         while not condition():
             if interruptible and self.interrupt.is_set():
                 raise KeyboardInterrupt
             if time.monotonic() > end:
-                if interruptible:
+                if required:
                     raise RuntimeError(f"timed out waiting for {what}")
                 return False
             time.sleep(0.02)
@@ -167,13 +205,13 @@ class Driver(Node):
             raise RuntimeError(result.message)
         published = result.samples
         self._wait(lambda: self._checked(published), "the collision monitor",
-                   interruptible=interruptible)
+                   interruptible=interruptible, required=interruptible)
         self.summarise(json.loads(result.summary))
         if self.recorder is not None:
             got = self.recorder.received
             self._wait(lambda: (got[contract.JOINT_STATES.name] >= published
                                 and got[contract.DIAGNOSTICS.name] >= 1),
-                       "the recorder", interruptible=interruptible)
+                       "the recorder", interruptible=interruptible, required=interruptible)
             time.sleep(0.2)  # the monitor's last events and verdict, published just now
             self.recorder.close(self.summary)
 

@@ -23,9 +23,9 @@ closure's, the panel contacts' and their boxes' geometry in
 increments and decrements the reference count of each array argument, two
 atomic operations an array, and LLVM inlines only small callees. numba's own
 inlining puts the callee's body in the caller's, where numba's
-reference-count pruning removes most of them; not those of an inlined
-kernel's arguments where it allocates an array between the two (an
-allocation is a call the pruning does not look through). Measured with perf on 10 x 10
+reference-count pruning removes most of them, not all (with the right-hand
+side's arrays allocated once per run, those left still took 10 % of an
+evaluation: docs/findings.md 5). Measured with perf on 10 x 10
 circuit 8 (exact closure, 0-0.2 s): ``NRT_incref`` and ``NRT_decref`` took
 14 % of the run and 23 % of an evaluation in the stowed stacks, where each
 touching pair's geometry made a dozen calls. With the inlining the window

@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit
 
 from panel_deploy.build import build_model
-from panel_deploy.dynamics import kernels, panel_contact, stiff
+from panel_deploy.dynamics import kernels, stiff
 from panel_deploy.dynamics.pack import pack
 from panel_deploy.dynamics.simulate import simulate
 from panel_deploy.scene import load_scene
@@ -40,9 +40,9 @@ REFERENCE_RTOL = (1e-11, 1e-10, 1e-9)
 @njit(cache=True)
 def _loop(P, y, calls, jacobian):
     s = 0.0
-    near = panel_contact.near_pairs(P)
+    scratch = kernels.scratch(P)
     for _ in range(calls):
-        s += stiff.stiff_jacobian(P, y, near)[0][0, 0] if jacobian else kernels.rhs(P, y, near)[0]
+        s += stiff.stiff_jacobian(P, y, scratch[0])[0][0, 0] if jacobian else kernels.rhs(P, y, scratch)[0]
     return s
 
 

@@ -59,12 +59,13 @@ LOCATORS = ",".join([*(f"panel_deploy._kernel_locator.{name}" for name in
 #: The package's files that hold compiled kernels or constants compiled into
 #: them, relative to the package: the sources of :func:`kernel_sources_stamp`
 #: (test_startup checks that every file with a kernel is here).
-KERNEL_SOURCES = ("boxes.py", "collision/geometry.py", "collision/monitor.py", "collision/motion.py",
-                  "collision/refine.py", "dynamics/_jit.py", "dynamics/air.py", "dynamics/articulated.py",
-                  "dynamics/closure.py", "dynamics/compiled.py", "dynamics/erk.py", "dynamics/hinges.py",
-                  "dynamics/integration.py", "dynamics/kernels.py", "dynamics/pack.py",
-                  "dynamics/panel_contact.py", "dynamics/rosenbrock.py", "dynamics/spatial.py",
-                  "dynamics/stiff.py", "dynamics/switches.py")
+KERNEL_SOURCES = ("boxes.py", "collision/geometry.py", "collision/monitor.py",
+                  "collision/motion.py", "collision/refine.py", "dynamics/_jit.py",
+                  "dynamics/air.py", "dynamics/articulated.py", "dynamics/buffers.py",
+                  "dynamics/closure.py", "dynamics/compiled.py", "dynamics/erk.py",
+                  "dynamics/hinges.py", "dynamics/integration.py", "dynamics/kernels.py",
+                  "dynamics/pack.py", "dynamics/panel_contact.py", "dynamics/rosenbrock.py",
+                  "dynamics/spatial.py", "dynamics/stiff.py", "dynamics/switches.py")
 
 NOTICE = "panel-deploy: compiling kernels for this machine, first run only (a few minutes)"
 

@@ -15,7 +15,7 @@ from panel_deploy.build import build_model
 from panel_deploy.collision import check_trajectory
 from panel_deploy.collision.geometry import box_signed_distance
 from panel_deploy.contacts import stowed_contacts, with_panel_contacts
-from panel_deploy.dynamics import kernels, panel_contact, simulate, stiff
+from panel_deploy.dynamics import articulated, integration, kernels, panel_contact, simulate, stiff
 from panel_deploy.dynamics.pack import pack
 from panel_deploy.dynamics.report import contact_energy_error, energy_balance_error
 from panel_deploy.dynamics.result import Status
@@ -26,6 +26,7 @@ from panel_deploy.scene import SimulationSection, load_scene
 from panel_deploy.summary import deployment_summary, deployment_text
 
 from test_dynamics_helpers import near as new_list
+from test_dynamics_helpers import scratch as new_scratch
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "config" / "scenes" / "paper_4x4.yaml"
@@ -530,7 +531,7 @@ def test_the_stiff_jacobian_holds_the_frictions_damping_at_zero_slip():
     for mu in (0.3, 0.0):
         P = pack(turning_panel(mu, 0.1)[0])
         delta = 1e-6  # rad/s: the corners slip at ~2.5e-7 m/s, far below v_f
-        rate = [kernels.rhs(P, kernels.state_vector([0.2], [w]), new_list(P))[1] for w in (-delta, delta)]
+        rate = [kernels.rhs(P, kernels.state_vector([0.2], [w]), new_scratch(P))[1] for w in (-delta, delta)]
         slope = (rate[1] - rate[0]) / (2 * delta)
         A, B, ok = stiff.stiff_jacobian(P, kernels.state_vector([0.2], [0.0]), new_list(P))
         assert ok
@@ -650,7 +651,8 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
     _, model, result = six_by_six["true"]
     P = pack(model)
     n = P.n
-    near = panel_contact.near_pairs(P)
+    run = kernels.scratch(P)
+    near = run[0]
     listed, spared = [], []
     for j in range(len(result.t)):
         y = kernels.state_vector(result.theta[j], result.omega[j])
@@ -660,7 +662,7 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
             rows = panel_contact._near_rows(P, box, R, p, near)
             a, b = P.contact[rows, 0].astype(int), P.contact[rows, 1].astype(int)
             spared.append(np.count_nonzero(near[6][a] + near[6][b] < near[7][rows]))
-            assert np.array_equal(kernels.rhs(P, y, near), kernels.rhs(P, y, new_list(P)))
+            assert np.array_equal(kernels.rhs(P, y, run), kernels.rhs(P, y, new_scratch(P)))
             for got, want in zip(stiff.stiff_terms(P, y, near)[1:],
                                  stiff.stiff_terms(P, y, new_list(P))[1:]):
                 assert np.array_equal(got, want)
@@ -676,6 +678,23 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
     assert np.median(spared[1::2]) > 0.5 * np.median(listed), (spared[1::2], listed)
 
 
+def test_the_gap_check_takes_the_poses_of_the_last_evaluation(six_by_six):
+    """The compiled loops check the loop-closure gap with the poses their last
+    right-hand side left in the run's scratch (integration.max_gap,
+    evaluated): the gap from y's own kinematics, to the bit, on the O(n) path."""
+    _, model, result = six_by_six["true"]
+    P = pack(model)
+    assert articulated.applies(P.n) and len(P.cut_a) > 0
+    run = kernels.scratch(P)
+    gaps = []
+    for j in range(len(result.t)):
+        y = kernels.state_vector(result.theta[j], result.omega[j])
+        kernels.rhs(P, y, run)
+        gaps.append(integration.max_gap(P, y, run, True))
+        assert gaps[-1] == integration.max_gap(P, y, new_scratch(P))
+    assert max(gaps) > 0.0
+
+
 def test_the_right_hand_side_leaves_the_onsets_of_its_own_state(six_by_six):
     """The step loops take an accepted step's contact onsets from its last
     right-hand side (panel_contact.take_onsets): after rhs at a sample's state they
@@ -685,17 +704,18 @@ def test_the_right_hand_side_leaves_the_onsets_of_its_own_state(six_by_six):
     _, model, result = six_by_six["true"]
     P = pack(model)
     n = P.n
-    near = panel_contact.near_pairs(P)
+    run = kernels.scratch(P)
+    near = run[0]
     met = 0
     for j in range(len(result.t)):
         y = kernels.state_vector(result.theta[j], result.omega[j])
-        kernels.rhs(P, y, near)
+        kernels.rhs(P, y, run)
         got, want = np.zeros(9), np.zeros(9)
         panel_contact.take_onsets(near, result.t[j], got)
         kernels.contact_onsets(P, y, result.t[j], want, new_list(P))
         assert np.array_equal(got, want)
         met += want[1] > 0.0
-        kernels.rhs(P, kernels.state_vector(result.theta[j], np.zeros(n)), near)
+        kernels.rhs(P, kernels.state_vector(result.theta[j], np.zeros(n)), run)
         rest = np.zeros(9)
         panel_contact.take_onsets(near, result.t[j], rest)
         assert np.array_equal(rest, np.zeros(9))

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from numba import njit
 from scipy.integrate import solve_ivp
 
 from panel_deploy.build import build_model
@@ -15,7 +16,7 @@ from panel_deploy.dynamics.pack import EXACT, PENALTY, TREE, pack
 from panel_deploy.model import AirParameters, Body, Model, State, box_inertia
 from panel_deploy.scene import SimulationSection, load_scene
 
-from test_dynamics_helpers import SIZE, hinge, near
+from test_dynamics_helpers import SIZE, hinge, near, scratch
 
 SCENE = Path(__file__).resolve().parent.parent / "config" / "scenes" / "paper_4x4.yaml"
 
@@ -67,6 +68,28 @@ def test_models_take_the_articulated_path(model):
     assert articulated.applies(P.n)
     assert P.method == (TREE if not model.cut_hinges else
                         PENALTY if model.closure.method == "penalty" else EXACT)
+
+
+@njit
+def _buffer_rows(b):
+    return b.R.shape[0], b.IA.shape[0], b.closure[1].shape
+
+
+def test_one_scratch_serves_every_evaluation_of_a_run(model):
+    """The O(n) path fills the arrays of the run's scratch (buffers.Buffers)
+    in place: at states one after another, rhs with one scratch equals rhs
+    with a new one each time, to the bit, and the arrays are sized for the
+    model (n joints, 5 constraints per cut hinge of the exact closure, none
+    for the penalty one); a model on the dense path gets none."""
+    P = pack(model)
+    run = scratch(P)
+    mc = 5 * len(P.cut_a) if P.method == EXACT else 0
+    assert _buffer_rows(run[1]) == (P.n + 1, P.n, (mc, P.n))
+    for y in states(model, 6):
+        assert np.array_equal(kernels.rhs(P, y, run), kernels.rhs(P, y, scratch(P)))
+    dense = pack(random_tree(n=articulated.MIN_N - 1))
+    assert not articulated.applies(dense.n)
+    assert _buffer_rows(scratch(dense)[1]) == (1, 0, (0, 0))
 
 
 def test_factor_solve_and_product_are_the_dense_ones(model):
@@ -151,7 +174,7 @@ def test_factor_reports_a_singular_mass_matrix():
     model = random_tree(n=20)
     P = pack(model)._replace(mass=np.zeros(20), inertia=np.zeros((20, 3, 3)))
     y = next(states(model, 1))
-    assert np.all(np.isnan(kernels.rhs(P, y, near(P))))
+    assert np.all(np.isnan(kernels.rhs(P, y, scratch(P))))
 
 
 def dense_dynamics(P, y):
@@ -183,7 +206,7 @@ def test_rhs_is_the_dense_solve(model):
     n = P.n
     for y in states(model, 4):
         qdd, dissipation, power, contact_power = dense_dynamics(P, y)
-        f = kernels.rhs(P, y, near(P))
+        f = kernels.rhs(P, y, scratch(P))
         assert np.abs(f[n:2 * n] - qdd).max() < 1e-9 * np.abs(qdd).max()
         assert np.array_equal(f[:n], y[n:2 * n])
         assert f[2 * n] == dissipation
@@ -204,12 +227,12 @@ def test_structured_w_step_is_the_dense_step(model, h):
         pytest.skip("the dense blocks of the exact closure are another W")
     N = 2 * P.n + kernels.ACCUMULATORS
     for y in states(model, 3):
-        f = kernels.rhs(P, y, near(P))
+        f = kernels.rhs(P, y, scratch(P))
         A, B, ok = stiff.stiff_jacobian(P, y, near(P))
         assert ok
-        y_dense, e_dense, ok_dense = rosenbrock.step(P, y, f, h, A, B, np.empty((7, N)), near(P))
+        y_dense, e_dense, ok_dense = rosenbrock.step(P, y, f, h, A, B, np.empty((7, N)), scratch(P))
         y_aba, e_aba, ok_aba = rosenbrock.step_terms(P, y, f, h, rosenbrock.terms(P, y, near(P)),
-                                                     np.empty((7, N)), near(P))
+                                                     np.empty((7, N)), scratch(P))
         assert ok_dense and ok_aba
         # the error estimate is a difference of stages: its round-off scales with the step
         scale = np.abs(y_dense - y).max()

@@ -4,7 +4,7 @@ against a tight reference, and its stability edge against Hairer's test."""
 
 import numpy as np
 import pytest
-from test_dynamics_helpers import near, plate_on_hinge
+from test_dynamics_helpers import near, plate_on_hinge, scratch
 
 from panel_deploy.dynamics import erk, kernels, simulate
 from panel_deploy.dynamics.pack import pack
@@ -52,12 +52,12 @@ def test_one_step_errors_shrink_as_fifth_and_fourth_order(name):
     model = plate_on_hinge(gravity=(0.0, 0.0, 9.81))
     P = pack(model)
     y = kernels.state_vector(np.array([1.0]), np.array([0.5]))
-    f = kernels.rhs(P, y, near(P))
+    f = kernels.rhs(P, y, scratch(P))
     K = np.empty((7, y.size))
     settings = SimulationSection(t_end=1.0, method="DOP853", rtol=1e-13, atol=1e-14, samples=2)
     errors, estimates = [], []
     for h in (4e-3, 2e-3, 1e-3):
-        y1, err, _ = erk.step(P, y, f, h, erk.PAIRS[name], K, near(P))
+        y1, err, _ = erk.step(P, y, f, h, erk.PAIRS[name], K, scratch(P))
         ref = simulate(model, SimulationSection(**{**settings.__dict__, "t_end": h}),
                        State(0.0, y[:1], y[1:2]))
         errors.append(abs(y1[0] - ref.theta[-1, 0]) + h * abs(y1[1] - ref.omega[-1, 0]))

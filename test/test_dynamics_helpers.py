@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from panel_deploy.dynamics import kernels
 from panel_deploy.dynamics.panel_contact import near_pairs
 from panel_deploy.model import Body, ClosureParameters, Hinge, Model, box_inertia
 
@@ -84,6 +85,12 @@ def near(P):
     """A new candidate list of the panel contact pairs of ``P`` (panel_contact.near_pairs),
     what a run passes the kernels."""
     return near_pairs(P)
+
+
+def scratch(P):
+    """A new scratch of a run on ``P`` (kernels.scratch: the candidate list
+    and the right-hand side's arrays), what a run passes the right-hand side."""
+    return kernels.scratch(P)
 
 
 def paper_hinge_law(theta, omega, k, c, k_s, c_s):

@@ -16,7 +16,7 @@ from panel_deploy.errors import ModelError
 from panel_deploy.model import State
 from panel_deploy.scene import SimulationSection
 
-from test_dynamics_helpers import near, overdamped_plate, plate_on_hinge, random_branched, ring_2x2
+from test_dynamics_helpers import near, overdamped_plate, plate_on_hinge, random_branched, ring_2x2, scratch
 
 
 def test_stiff_overdamped_hinge_matches_closed_form():
@@ -68,9 +68,9 @@ def test_w_method_local_error_is_fourth_order_with_any_matrix(jacobian):
     model = plate_on_hinge(gravity=(0.0, 0.0, 9.81))
     P = pack(model)
     y = state_vector([1.0], [0.5])
-    f = kernels.rhs(P, y, near(P))
+    f = kernels.rhs(P, y, scratch(P))
     if jacobian == "exact":
-        J = kernels.rhs_jacobian(P, y, f, near(P))
+        J = kernels.rhs_jacobian(P, y, f, scratch(P))
         A, B = J[1:2, :1].copy(), J[1:2, 1:2].copy()
     else:
         A, B = np.zeros((1, 1)), np.zeros((1, 1))
@@ -78,7 +78,7 @@ def test_w_method_local_error_is_fourth_order_with_any_matrix(jacobian):
     settings = SimulationSection(t_end=1.0, method="DOP853", rtol=1e-13, atol=1e-14, samples=2)
     errors = []
     for h in (4e-3, 2e-3, 1e-3):
-        y1, err, ok = rosenbrock.step(P, y, f, h, A, B, K, near(P))
+        y1, err, ok = rosenbrock.step(P, y, f, h, A, B, K, scratch(P))
         assert ok
         ref = simulate(model, dataclasses.replace(settings, t_end=h),
                        State(0.0, y[:1], y[1:2]))
@@ -96,7 +96,7 @@ def test_stiff_jacobian_holds_the_stiff_spectrum(closure):
     n = P.n
     y = state_vector([-0.01, 1.0, 1.0], [0.5, -0.3, 0.2])
     assert hinges.contact_mode(y[0]) == 0
-    Jfd = kernels.rhs_jacobian(P, y, kernels.rhs(P, y, near(P)), near(P))[:2 * n, :2 * n]
+    Jfd = kernels.rhs_jacobian(P, y, kernels.rhs(P, y, scratch(P)), scratch(P))[:2 * n, :2 * n]
     A, B, ok = stiff.stiff_jacobian(P, y, near(P))
     assert ok
     Jst = np.block([[np.zeros((n, n)), np.eye(n)], [A, B]])

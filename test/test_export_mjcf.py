@@ -171,8 +171,7 @@ def _open_tree(model):
 def test_open_tree_accelerations_match_the_kernel(make):
     """MuJoCo's qacc with constraints off equals our forward dynamics (springs,
     dampers, gravity, cut-hinge spring) at random states inside (0, pi)."""
-    from panel_deploy.dynamics.kernels import rhs, state_vector
-    from panel_deploy.dynamics.panel_contact import near_pairs
+    from panel_deploy.dynamics.kernels import rhs, scratch, state_vector
     from panel_deploy.dynamics.pack import pack
 
     model = make()
@@ -186,7 +185,7 @@ def test_open_tree_accelerations_match_the_kernel(make):
         d.qpos[idx] = theta
         d.qvel[idx] = omega
         mujoco.mj_forward(m, d)
-        ours = rhs(P, state_vector(theta, omega), near_pairs(P))[n:2 * n]
+        ours = rhs(P, state_vector(theta, omega), scratch(P))[n:2 * n]
         assert np.all(np.isfinite(ours))
         np.testing.assert_allclose(d.qacc[idx], ours, rtol=1e-9, atol=1e-9 * np.abs(ours).max())
 

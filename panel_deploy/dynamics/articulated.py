@@ -76,14 +76,23 @@ PACKED.T[np.triu_indices(6)] = np.arange(21)
 
 @njit(cache=True, inline="always", **FLOAT_MATH)
 def factor(P, S, Jb, hb, armature):
+    """:func:`factor_into` new arrays: ``(U, D, ok)``."""
+    n = P.n
+    U, D = np.empty((n, 6)), np.empty(n)
+    return U, D, factor_into(P, S, Jb, hb, armature, np.empty((n, 21)), U, D)
+
+
+@njit(cache=True, inline="always", **FLOAT_MATH)
+def factor_into(P, S, Jb, hb, armature, IA, U, D):
     """Factor ``H = M + diag(armature)`` (armature (n,), kg m^2) by the
     articulated-body inertias, leaves first, from the bodies' angular
     inertias Jb (n, 3, 3, kg m^2) and first moments hb (n, 3, kg m) of
     :func:`kernels.body_inertias`.
 
-    Returns (U, D, ok): ``U[i] = I^A_i S_i`` (n, 6) and ``D[i] = S_i . U[i] +
-    armature[i]`` (n,); ok is False if some D is not positive (H not positive
-    definite), as the Cholesky of the dense path fails.
+    Writes ``U[i] = I^A_i S_i`` to U (n, 6) and ``D[i] = S_i . U[i] +
+    armature[i]`` to D (n,), the articulated inertias to IA (n, 21, scratch);
+    returns ok, False if some D is not positive (H not positive definite), as
+    the Cholesky of the dense path fails.
 
     The articulated inertias are symmetric, so each is kept as its upper
     triangle (``PACKED``), built straight from (Jb, hb, mass): 21 updates a
@@ -91,7 +100,6 @@ def factor(P, S, Jb, hb, armature):
     (:func:`inertias`) to fill and copy first (10 x 10: 2.4 us against 4.3).
     """
     n = P.n
-    IA = np.empty((n, 21))
     for i in range(n):
         h0, h1, h2 = hb[i, 0], hb[i, 1], hb[i, 2]
         m = P.mass[i]
@@ -105,8 +113,6 @@ def factor(P, S, Jb, hb, armature):
         IA[i, 15], IA[i, 16], IA[i, 17] = m, 0.0, 0.0
         IA[i, 18], IA[i, 19] = m, 0.0
         IA[i, 20] = m
-    U = np.empty((n, 6))
-    D = np.empty(n)
     for i in range(n - 1, -1, -1):
         d = armature[i]
         for r in range(6):
@@ -116,7 +122,7 @@ def factor(P, S, Jb, hb, armature):
             U[i, r] = s
             d += S[i, r] * s
         if not d > 0.0:
-            return U, D, False
+            return False
         D[i] = d
         a = P.parent[i]
         if a < n:
@@ -127,7 +133,7 @@ def factor(P, S, Jb, hb, armature):
                 for c in range(r, 6):
                     IA[a, k] += IA[i, k] - ur * U[i, c]
                     k += 1
-    return U, D, True
+    return True
 
 
 @njit(cache=True, inline="always", **FLOAT_MATH)

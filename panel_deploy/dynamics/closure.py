@@ -66,8 +66,9 @@ def largest_gap(P, R, p):
 
 
 @njit(cache=True, inline="always", **FLOAT_MATH)
-def cut_forces(P, R, p, w, vo):
-    """Wrenches of the cut hinges on their bodies, with energy and damper power.
+def cut_forces(P, R, p, w, vo, F):
+    """Wrenches of the cut hinges on their bodies into F (n + 1, 6, overwritten),
+    with energy and damper power.
 
     The cut hinge's own spring, damper and contact (Eq. 2-4 about its axis) for
     every closure method; for PENALTY also the five springs and dampers of
@@ -76,13 +77,9 @@ def cut_forces(P, R, p, w, vo):
     N springs' energy 0.5 k_N |P dN|^2 depends on u, so body a also gets the
     torque ``k_N (u . dN) u x dN`` that makes the force its exact gradient.
 
-    Returns
-    -------
-    F : (n + 1, 6) wrenches about the ground origin
-    energy, power : float   J, W
+    F holds the wrenches about the ground origin. Returns (energy, power), J and W.
     """
-    n = P.n
-    F = np.zeros((n + 1, 6))
+    F[:] = 0.0
     energy = 0.0
     power = 0.0
     for j in range(P.cut_a.shape[0]):
@@ -114,12 +111,22 @@ def cut_forces(P, R, p, w, vo):
         power += P.c_N * sp.dot(vNp, vNp)
         sp.add_wrench(F, b, sp.ZERO3, fN, Nb)
         sp.add_wrench(F, a, sp.scale(sp.cross(u, dN), P.k_N * sp.dot(u, dN)), sp.scale(fN, -1.0), Na)
-    return F, energy, power
+    return energy, power
 
 
 @njit(cache=True, inline="always", **FLOAT_MATH)
 def closure_jacobian(P, R, p, w, vo, S, acc):
-    """Exact-closure constraints of Eq. (5) kept as equalities.
+    """:func:`closure_jacobian_into` new arrays: ``(c, J, gamma)``."""
+    m5, n = 5 * P.cut_a.shape[0], P.n
+    c, J, gamma = np.empty(m5), np.empty((m5, n)), np.empty(m5)
+    closure_jacobian_into(P, R, p, w, vo, S, acc, c, J, gamma, np.empty((6, n)))
+    return c, J, gamma
+
+
+@njit(cache=True, inline="always", **FLOAT_MATH)
+def closure_jacobian_into(P, R, p, w, vo, S, acc, c, J, gamma, work):
+    """Exact-closure constraints of Eq. (5) kept as equalities, into c, J and
+    gamma (overwritten); work is (6, n) scratch.
 
     Five per cut hinge: M_b - M_a = 0 (3) and e_k . (N_b - N_a) = 0 for the two
     unit normals e_1, e_2 of the axis carried by body a.
@@ -129,19 +136,15 @@ def closure_jacobian(P, R, p, w, vo, S, acc):
     acc : (n + 1, 6) or None-like (shape (0, 6))
         Velocity-product spatial accelerations; when empty, ``gamma`` is zeros.
 
-    Returns
-    -------
     c : (5 m,) constraint values, m
     J : (5 m, n) Jacobian dc/dtheta, m/rad
     gamma : (5 m,) dJ/dt omega, m/s^2
     """
     n = P.n
     m = P.cut_a.shape[0]
-    c = np.empty(5 * m)
-    J = np.zeros((5 * m, n))
-    gamma = np.zeros(5 * m)
-    # rows 0-2: d(N_b - N_a)/d omega, rows 3-5: d(w_a)/d omega, of one cut
-    work = np.empty((6, n))
+    J[:] = 0.0
+    gamma[:] = 0.0
+    # work rows 0-2: d(N_b - N_a)/d omega, rows 3-5: d(w_a)/d omega, of one cut
     with_gamma = acc.shape[0] > 0
     for j in range(m):
         a, b = P.cut_a[j], P.cut_b[j]
@@ -178,26 +181,34 @@ def closure_jacobian(P, R, p, w, vo, S, acc):
                 edot = sp.cross(wa, e)
                 eddot = sp.add(sp.cross(sp.get(acc, a), e), sp.cross(wa, edot))
                 gamma[r + 3 + k] = sp.dot(e, aN) + 2.0 * sp.dot(edot, vN) + sp.dot(eddot, dN)
-    return c, J, gamma
 
 
 @njit(cache=True, **FLOAT_MATH)
 def cholesky(A):
+    """The lower Cholesky factor L of A (n, n): ``(L, ok)``, ok False where A
+    is not positive definite."""
+    L = np.empty_like(A)
+    return L, cholesky_into(A, L)
+
+
+@njit(cache=True, inline="always", **FLOAT_MATH)
+def cholesky_into(A, L):
+    """:func:`cholesky` into L (n, n, overwritten); returns ok."""
     n = A.shape[0]
-    L = np.zeros_like(A)
+    L[:] = 0.0
     for j in range(n):
         s = A[j, j]
         for k in range(j):
             s -= L[j, k] * L[j, k]
         if not s > 0.0:
-            return L, False
+            return False
         L[j, j] = math.sqrt(s)
         for i in range(j + 1, n):
             s = A[i, j]
             for k in range(j):
                 s -= L[i, k] * L[j, k]
             L[i, j] = s / L[j, j]
-    return L, True
+    return True
 
 
 @njit(cache=True, **FLOAT_MATH)
@@ -232,40 +243,36 @@ def constraint_factor(L, J, regularisation):
     (:func:`_regularised_cholesky`); ``L`` is the Cholesky factor of M. Returns ``(Y, LA, ok)``."""
     Y = J.T.copy()
     cholesky_solve(L, Y)
-    LA, ok = _regularised_cholesky(sp.matmul(J, Y), regularisation)
-    return Y, LA, ok
+    A = sp.matmul(J, Y)
+    LA = np.empty_like(A)
+    return Y, LA, _regularised_cholesky(A, regularisation, LA)
 
 
 @njit(cache=True, inline="always", **FLOAT_MATH)
-def articulated_closure(P, S, UA, D, Q, c, J, gamma, omega, qdd):
+def articulated_closure(P, S, UA, D, Q, c, J, gamma, omega, qdd, buffers):
     """Write to qdd (n,) the exact closure's joint accelerations
     (:func:`exact_closure`'s) with M factored by the articulated-body
     algorithm (:func:`articulated.factor`'s (UA, D)), no n x n matrix:
     Q and the rows of J (mc, n) go up the tree in one pass
     (:func:`articulated.up_rows`); J M^-1 J^T and J M^-1 Q are sums over
     their innovations, and only ``Q + J^T lam`` goes back down, in place of
-    1 + mc rows. Returns (the constraint forces' power (W), ok); ok is False
+    1 + mc rows. ``buffers``: :class:`.buffers.Buffers`' closure (its items 4 on).
+    Returns (the constraint forces' power (W), ok); ok is False
     where the regularised J M^-1 J^T is not positive definite."""
     n, mc = P.n, J.shape[0]
-    rows = np.empty((1 + mc, n))
+    rows, E, work, inv, A, b, LA, lam, cdot = buffers[4:]
     rows[0] = Q
     rows[1:] = J
-    E = np.empty((1 + mc, n))
-    work = np.empty((1 + mc, n + 1, 6))
     articulated.up_rows(P, S, UA, D, rows, E, work)
-    inv = np.empty(n)
     for i in range(n):
         inv[i] = 1.0 / D[i]
-    A = np.empty((mc, mc))
-    b = np.empty(mc)
     for r in range(mc):
         b[r] = _weighted_dot(E[1 + r], E[0], inv)
         for s in range(r + 1):
             A[r, s] = A[s, r] = _weighted_dot(E[1 + r], E[1 + s], inv)
-    LA, ok = _regularised_cholesky(A, P.regularisation)
-    if not ok:
+    if not _regularised_cholesky(A, P.regularisation, LA):
         return 0.0, False
-    lam, cdot = _multipliers(P, c, J, gamma, omega, b, LA)
+    _multipliers(P, c, J, gamma, omega, b, LA, lam, cdot)
     qdd[:] = E[0]
     for r in range(mc):
         for i in range(n):
@@ -296,33 +303,34 @@ def _weighted_dot(x, y, w):
 
 
 @njit(cache=True, inline="always", **FLOAT_MATH)
-def _regularised_cholesky(A, regularisation):
-    """Cholesky factor of A = J M^-1 J^T (mc, mc, overwritten) + a Tikhonov
-    term, relative to its largest diagonal entry, which keeps it defined
-    through rank loss of the closure Jacobian (the stowed and flat-aligned
-    singular states): ``(LA, ok)``."""
+def _regularised_cholesky(A, regularisation, LA):
+    """Cholesky factor into LA of A = J M^-1 J^T (mc, mc, overwritten) + a
+    Tikhonov term, relative to its largest diagonal entry, which keeps it
+    defined through rank loss of the closure Jacobian (the stowed and
+    flat-aligned singular states); returns ok (:func:`cholesky_into`)."""
     mc = A.shape[0]
     scale = 0.0
     for r in range(mc):
         scale = max(scale, A[r, r])
     for r in range(mc):
         A[r, r] += regularisation * scale + 1e-300
-    return cholesky(A)
+    return cholesky_into(A, LA)
 
 
 @njit(cache=True, inline="always", **FLOAT_MATH)
-def _multipliers(P, c, J, gamma, omega, Jqdd, LA):
+def _multipliers(P, c, J, gamma, omega, Jqdd, LA, lam, cdot):
     """The exact closure's Lagrange multipliers (Baumgarte-stabilised, time
-    constant ``P.baumgarte``) from :func:`closure_jacobian`'s (c, J, gamma),
-    J times the tree's qdd, ``Jqdd`` (mc,), and the factor LA of the
-    regularised J M^-1 J^T: ``(lam, J omega)``."""
+    constant ``P.baumgarte``) into lam (mc,), and J omega into cdot (mc,),
+    from :func:`closure_jacobian`'s (c, J, gamma), J times the tree's qdd,
+    ``Jqdd`` (mc,), and the factor LA of the regularised J M^-1 J^T."""
     T = P.baumgarte
-    cdot = sp.mv(J, omega)
-    lam = np.empty(J.shape[0])
     for r in range(J.shape[0]):
-        lam[r] = (-gamma[r] - (2.0 / T) * cdot[r] - c[r] / (T * T)) - Jqdd[r]
+        s = 0.0
+        for i in range(J.shape[1]):
+            s += J[r, i] * omega[i]
+        cdot[r] = s
+        lam[r] = (-gamma[r] - (2.0 / T) * s - c[r] / (T * T)) - Jqdd[r]
     cholesky_solve(LA, lam.reshape((lam.shape[0], 1)))
-    return lam, cdot
 
 
 @njit(cache=True, inline="always", **FLOAT_MATH)
@@ -331,8 +339,9 @@ def exact_closure(P, c, J, gamma, Y, LA, omega, qdd):
     (:func:`_multipliers`) from :func:`closure_jacobian`'s (c, J, gamma) and
     :func:`constraint_factor`'s (Y, LA) of the dense M. Returns the
     constraint forces' power, W."""
-    n = P.n
-    lam, cdot = _multipliers(P, c, J, gamma, omega, sp.mv(J, qdd), LA)
+    n, mc = P.n, J.shape[0]
+    lam, cdot = np.empty(mc), np.empty(mc)
+    _multipliers(P, c, J, gamma, omega, sp.mv(J, qdd), LA, lam, cdot)
     for i in range(n):
         s = 0.0
         for r in range(J.shape[0]):

@@ -120,9 +120,10 @@ def compiled_loop(scheme):
         stiff_steps = counts[7]  # consecutive accepted explicit steps at the stability limit
         calm_steps = counts[8]  # accepted steps below it since the last at it
         expo = -1.0 / (rosenbrock.ERROR_ORDER if implicit else 5)
-        near = panel_contact.near_pairs(P)
+        scratch = kernels.scratch(P)
+        near = scratch[0]
         if nfev == 0:
-            f = kernels.rhs(P, y, near)
+            f = kernels.rhs(P, y, scratch)
             nfev = 1
             # Hairer, Norsett & Wanner (II.4) starting step
             sc = np.empty(N)
@@ -154,13 +155,13 @@ def compiled_loop(scheme):
                     njev += 1
                     fresh = True
                 if structured:
-                    y1, err, ok = rosenbrock.step_terms(P, y, f, step, jac, K, near)
+                    y1, err, ok = rosenbrock.step_terms(P, y, f, step, jac, K, scratch)
                 else:
-                    y1, err, ok = rosenbrock.step(P, y, f, step, A, B, K, near)
+                    y1, err, ok = rosenbrock.step(P, y, f, step, A, B, K, scratch)
                 nfev += 3
                 nlu += 1
             else:
-                y1, err, y6 = erk.step(P, y, f, step, pair, K, near)
+                y1, err, y6 = erk.step(P, y, f, step, pair, K, scratch)
                 nfev += 6
             en = rms_norm(err, y, y1, rtol, atol)
             if not math.isfinite(en):
@@ -180,7 +181,7 @@ def compiled_loop(scheme):
                 t = target if lands else t + step
                 y = y1
                 if implicit:
-                    f = kernels.rhs(P, y, near)
+                    f = kernels.rhs(P, y, scratch)
                     nfev += 1
                     fresh = False
                     while j < s and t_eval[j] <= t:
@@ -196,7 +197,7 @@ def compiled_loop(scheme):
                 # the step's last right-hand side was at its end: the explicit pair's K[6], f
                 integration.record_onsets(P, y, t, t_eval, j, onsets, near, True)
                 nsteps += 1
-                if gap_limit > 0.0 and integration.max_gap(P, y) > gap_limit:
+                if gap_limit > 0.0 and integration.max_gap(P, y, scratch, True) > gap_limit:
                     status, code = -1, 3
                     break
                 if nsteps >= max_steps:

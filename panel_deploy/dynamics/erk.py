@@ -79,11 +79,11 @@ PAIRS = {"dopri5": DOPRI5, "tsit5": TSIT5}
 
 
 @njit(cache=True, **FLOAT_MATH)
-def step(P, y, f, h, pair, K, near):
+def step(P, y, f, h, pair, K, scratch):
     """One step of length h of ``pair``; returns (y1, err, y6) and leaves
     rhs(y1) in K[6] and rhs(y6) in K[5]; y6 is the sixth stage's state, at
-    the step's end like y1, for :func:`stiffness_ratio` (``near``: the run's
-    candidate list, :func:`panel_contact.near_pairs`)."""
+    the step's end like y1, for :func:`stiffness_ratio` (``scratch``: the
+    run's :func:`kernels.scratch`)."""
     A, E = pair.A, pair.E
     N = y.shape[0]
     K[0] = f
@@ -94,14 +94,14 @@ def step(P, y, f, h, pair, K, near):
             for q in range(st):
                 s += h * A[st, q] * K[q, i]
             yi[i] = s
-        K[st] = kernels.rhs(P, yi, near)
+        K[st] = kernels.rhs(P, yi, scratch)
     y1 = np.empty(N)
     for i in range(N):
         s = y[i]
         for q in range(6):
             s += h * A[6, q] * K[q, i]
         y1[i] = s
-    K[6] = kernels.rhs(P, y1, near)
+    K[6] = kernels.rhs(P, y1, scratch)
     err = np.empty(N)
     for i in range(N):
         s = 0.0

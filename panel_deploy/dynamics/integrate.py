@@ -34,7 +34,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import ModelError
-from . import compiled, kernels, panel_contact, scipy_solvers
+from . import compiled, kernels, scipy_solvers
 from .integration import Counters, Integration
 from .result import Status, no_onsets
 
@@ -66,7 +66,7 @@ def integrate_blocks(P, y0, t_eval, settings, max_steps, gap_limit, stops=None):
                          f"got {settings.method!r}")
     stops = (len(t_eval) - 1,) if stops is None else stops
     try:
-        finite = bool(np.all(np.isfinite(kernels.rhs(P, y0, panel_contact.near_pairs(P)))))
+        finite = bool(np.all(np.isfinite(kernels.rhs(P, y0, kernels.scratch(P)))))
     except ZeroDivisionError:
         finite = False
     if not finite:

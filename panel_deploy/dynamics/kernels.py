@@ -42,14 +42,28 @@ from . import articulated
 from . import spatial as sp
 from ._jit import FLOAT_MATH
 from .air import air_drag
-from .closure import (articulated_closure, cholesky, cholesky_solve, closure_jacobian, constraint_factor,
-                      cut_angle, cut_ends, cut_forces, exact_closure, largest_gap)
+from .buffers import allocate
+from .closure import (articulated_closure, cholesky, cholesky_solve, closure_jacobian,
+                      closure_jacobian_into, constraint_factor, cut_angle, cut_ends, cut_forces,
+                      exact_closure, largest_gap)
 from .hinges import hinge_law
 from .pack import EXACT, TREE
 from .panel_contact import near_pairs, panel_contacts, take_onsets
 
 #: Integrals after theta and omega in the state vector (see the module docstring).
 ACCUMULATORS = 3
+
+
+@njit(cache=True, **FLOAT_MATH)
+def scratch(P):
+    """The mutable scratch of one run of :func:`rhs`, never shared between
+    runs: the panel contacts' candidate list
+    (:func:`.panel_contact.near_pairs`) and the arrays the O(n) path fills
+    (:func:`.buffers.allocate`: none where :func:`articulated.applies` does
+    not, the exact closure's only for it)."""
+    n = P.n if articulated.applies(P.n) else 0
+    mc = 5 * P.cut_a.shape[0] if n > 0 and P.method == EXACT else 0
+    return near_pairs(P), allocate(n, mc)
 
 
 def state_vector(theta, omega):
@@ -60,10 +74,21 @@ def state_vector(theta, omega):
 
 @njit(cache=True, inline="always", **FLOAT_MATH)
 def kinematics(P, theta, omega):
-    """Poses, velocities and joint screws of every body.
+    """Poses, velocities and joint screws of every body, new arrays
+    (:func:`kinematics_into`): ``(R, p, w, vo, S)``."""
+    n = P.n
+    R, p, w, vo = np.empty((n + 1, 3, 3)), np.empty((n + 1, 3)), np.empty((n + 1, 3)), np.empty((n + 1, 3))
+    S = np.empty((n, 6))
+    kinematics_into(P, theta, omega, R, p, w, vo, S)
+    return R, p, w, vo, S
 
-    Returns
-    -------
+
+@njit(cache=True, inline="always", **FLOAT_MATH)
+def kinematics_into(P, theta, omega, R, p, w, vo, S):
+    """Poses, velocities and joint screws of every body, into (overwritten):
+
+    Parameters
+    ----------
     R : (n + 1, 3, 3)   orientations, ground last
     p : (n + 1, 3)      centroids, m
     w : (n + 1, 3)      angular velocities, rad/s
@@ -72,13 +97,11 @@ def kinematics(P, theta, omega):
     S : (n, 6)          joint screws (axis, hinge point x axis)
     """
     n = P.n
-    R = np.zeros((n + 1, 3, 3))
-    p = np.empty((n + 1, 3))
-    w = np.zeros((n + 1, 3))
-    vo = np.zeros((n + 1, 3))
-    S = np.empty((n, 6))
     for r in range(3):
-        R[n, r, r] = 1.0
+        for c in range(3):
+            R[n, r, c] = 1.0 if r == c else 0.0
+        w[n, r] = 0.0
+        vo[n, r] = 0.0
     sp.put(p, n, sp.get(P.r0, n))
     for i in range(n):
         a = P.parent[i]
@@ -95,7 +118,6 @@ def kinematics(P, theta, omega):
         sp.put(S, i, hu, 3)
         sp.put(w, i, sp.add(sp.get(w, a), sp.scale(u, omega[i])))
         sp.put(vo, i, sp.add(sp.get(vo, a), sp.scale(hu, omega[i])))
-    return R, p, w, vo, S
 
 
 @njit(cache=True, **FLOAT_MATH)
@@ -141,14 +163,18 @@ def loop_residual(P, theta):
 @njit(cache=True, inline="always", **FLOAT_MATH)
 def body_inertias(P, R, p):
     """Angular inertias J (n, 3, 3, kg m^2, see above) and first moments h = m c
-    (n, 3, kg m) of the bodies about the ground origin."""
-    n = P.n
-    Jb = np.empty((n, 3, 3))
-    hb = np.empty((n, 3))
-    for i in range(n):
+    (n, 3, kg m) of the bodies about the ground origin, new arrays."""
+    Jb, hb = np.empty((P.n, 3, 3)), np.empty((P.n, 3))
+    body_inertias_into(P, R, p, Jb, hb)
+    return Jb, hb
+
+
+@njit(cache=True, inline="always", **FLOAT_MATH)
+def body_inertias_into(P, R, p, Jb, hb):
+    """:func:`body_inertias` into Jb and hb (overwritten)."""
+    for i in range(P.n):
         sp.angular_inertia(P, R, p, i, Jb)
         sp.put(hb, i, sp.scale(sp.get(p, i), P.mass[i]))
-    return Jb, hb
 
 
 @njit(cache=True, **FLOAT_MATH)
@@ -196,13 +222,14 @@ def contact_onsets(P, y, t, record, near):
 
 
 @njit(cache=True, inline="always", **FLOAT_MATH)
-def _bias(P, theta, omega, kin, Jb, hb, near):
+def _bias(P, theta, omega, kin, Jb, hb, near, f, acc, Q):
     """Generalised force minus bias by recursive Newton-Euler with zero joint
     acceleration, for the kinematics ``kin`` and :func:`body_inertias`' (J, h),
-    and the panel contacts' candidate list ``near`` (:func:`.panel_contact.near_pairs`).
+    and the panel contacts' candidate list ``near`` (:func:`.panel_contact.near_pairs`);
+    into f (n + 1, 6, the bodies' wrenches, scratch), acc and Q (overwritten).
 
     Returns Q (n,) N m (``M qdd = Q`` for the tree), the velocity-product
-    spatial accelerations (n + 1, 6), the spring energy (J, the panel
+    spatial accelerations acc (n + 1, 6), the spring energy (J, the panel
     contacts' included), the panel contacts' part of it (J) and the power
     their springs take (W), the dissipation (W: dampers and air drag) and the
     gravity energy (J).
@@ -210,15 +237,15 @@ def _bias(P, theta, omega, kin, Jb, hb, near):
     n = P.n
     R, p, w, vo, S = kin
     if P.method != TREE:
-        f, spring, dissipation = cut_forces(P, R, p, w, vo)
+        spring, dissipation = cut_forces(P, R, p, w, vo, f)
         for i in range(n + 1):
             for k in range(6):
                 f[i, k] = -f[i, k]
     else:
-        f = np.zeros((n + 1, 6))
+        f[:] = 0.0
         spring = 0.0
         dissipation = 0.0
-    acc = np.zeros((n + 1, 6))
+    acc[n, :] = 0.0
     gravity_energy = 0.0
     for i in range(n):
         a = P.parent[i]
@@ -245,7 +272,6 @@ def _bias(P, theta, omega, kin, Jb, hb, near):
     contact, pw, contact_power = panel_contacts(P, R, p, w, vo, f, near)
     spring += contact
     dissipation += pw
-    Q = np.empty(n)
     for i in range(n - 1, -1, -1):
         tau, e, pw = hinge_law(theta[i], omega[i], P.k[i], P.c[i], P.k_s, P.c_s, P.stop_ramp)
         spring += e
@@ -273,18 +299,21 @@ def mass_and_bias(P, theta, omega, near):
         J (the panel contacts' included), J (theirs), W (taken by their
         springs), W (dampers and air drag), J
     """
+    n = P.n
     kin = kinematics(P, theta, omega)
     R, p, _, _, S = kin
     Jb, hb = body_inertias(P, R, p)
     M = mass_matrix(P, S, Jb, hb)
-    Q, acc, spring, contact, contact_power, dissipation, gravity_energy = _bias(P, theta, omega, kin, Jb, hb, near)
+    Q, acc, spring, contact, contact_power, dissipation, gravity_energy = _bias(
+        P, theta, omega, kin, Jb, hb, near, np.empty((n + 1, 6)), np.empty((n + 1, 6)), np.empty(n))
     return M, Q, kin, acc, spring, contact, contact_power, dissipation, gravity_energy
 
 
 @njit(cache=True, **FLOAT_MATH)
-def rhs(P, y, near):
+def rhs(P, y, scratch):
     """dy/dt of the state vector (see the module docstring); NaN if M is not positive definite.
-    ``near``: the run's candidate list of panel contact pairs (:func:`.panel_contact.near_pairs`).
+    ``scratch``: the run's :func:`scratch`; on the O(n) path its arrays hold
+    this evaluation's kinematics and factors until the next.
 
     Solves ``M qdd = Q`` by the articulated-body algorithm (O(n)) where
     :func:`articulated.applies`, else by CRBA and Cholesky.
@@ -295,26 +324,9 @@ def rhs(P, y, near):
     dy = np.empty(2 * n + ACCUMULATORS)
     dy[:n] = omega
     dy[2 * n + 1] = 0.0
+    near = scratch[0]
     if articulated.applies(P.n):
-        kin = kinematics(P, theta, omega)
-        R, p, _, _, S = kin
-        Jb, hb = body_inertias(P, R, p)
-        Q, acc, _, _, contact_power, dissipation, _ = _bias(P, theta, omega, kin, Jb, hb, near)
-        dy[2 * n] = dissipation
-        dy[2 * n + 2] = contact_power
-        U, D, ok = articulated.factor(P, S, Jb, hb, np.zeros(n))
-        if not ok:
-            dy[:] = np.nan
-            return dy
-        qdd = dy[n:2 * n]
-        if P.method != EXACT:
-            articulated.solve(P, S, U, D, Q, qdd, np.empty((n + 1, 6)))
-        else:
-            c, J, gamma = closure_jacobian(P, R, p, kin[2], kin[3], S, acc)
-            dy[2 * n + 1], ok = articulated_closure(P, S, U, D, Q, c, J, gamma, omega, qdd)
-            if not ok:
-                dy[:] = np.nan
-                return dy
+        _articulated_rhs(P, theta, omega, near, scratch[1], dy)
         return dy
     M, qdd, kin, acc, _, _, contact_power, dissipation, _ = mass_and_bias(P, theta, omega, near)
     dy[2 * n] = dissipation
@@ -337,15 +349,43 @@ def rhs(P, y, near):
 
 
 @njit(cache=True, **FLOAT_MATH)
-def rhs_jacobian(P, y, f0, near):
-    """Forward-difference Jacobian d rhs / dy, (N, N) for y (N,), given f0 = rhs(P, y, near)."""
+def _articulated_rhs(P, theta, omega, near, b, dy):
+    """:func:`rhs`'s O(n) path: dy[n:] from dy[:n] = omega, into the
+    :class:`.buffers.Buffers` b."""
+    n = P.n
+    R, p, w, vo, S, Jb, hb, f, acc, Q = b.R, b.p, b.w, b.vo, b.S, b.Jb, b.hb, b.f, b.acc, b.Q
+    IA, U, D, closure = b.IA, b.U, b.D, b.closure
+    kinematics_into(P, theta, omega, R, p, w, vo, S)
+    body_inertias_into(P, R, p, Jb, hb)
+    _, _, _, _, contact_power, dissipation, _ = _bias(P, theta, omega, (R, p, w, vo, S), Jb, hb,
+                                                      near, f, acc, Q)
+    dy[2 * n] = dissipation
+    dy[2 * n + 2] = contact_power
+    if not articulated.factor_into(P, S, Jb, hb, b.armature, IA, U, D):
+        dy[:] = np.nan
+        return
+    qdd = dy[n:2 * n]
+    if P.method != EXACT:
+        articulated.solve(P, S, U, D, Q, qdd, f)  # f is spent: the solve's scratch
+        return
+    c, J, gamma, jwork = closure[:4]
+    closure_jacobian_into(P, R, p, w, vo, S, acc, c, J, gamma, jwork)
+    dy[2 * n + 1], ok = articulated_closure(P, S, U, D, Q, c, J, gamma, omega, qdd, closure)
+    if not ok:
+        dy[:] = np.nan
+
+
+@njit(cache=True, **FLOAT_MATH)
+def rhs_jacobian(P, y, f0, scratch):
+    """Forward-difference Jacobian d rhs / dy, (N, N) for y (N,), given f0 =
+    rhs(P, y, scratch) (``scratch``: the run's :func:`scratch`)."""
     N = y.shape[0]
     Jac = np.zeros((N, N))
     yp = y.copy()
     for j in range(2 * P.n):
         h = 1.4901161193847656e-08 * max(1.0, abs(y[j]))
         yp[j] = y[j] + h
-        Jac[:, j] = (rhs(P, yp, near) - f0) / h
+        Jac[:, j] = (rhs(P, yp, scratch) - f0) / h
         yp[j] = y[j]
     return Jac
 

@@ -298,14 +298,13 @@ def _solution(y, K):
 
 
 @njit(cache=True, **FLOAT_MATH)
-def step(P, y, f, h, A, B, K, near):
+def step(P, y, f, h, A, B, K, scratch):
     """One ROS34PW2 step of length h from y (f = rhs(P, y)) with Jacobian blocks A, B.
 
     Stages go to K (4, N). Returns (y1, err, ok): the order-3 solution, the
     difference to the embedded order-2 one, and False if ``W`` is singular
     (the caller shortens the step).
-    ``near``: the run's candidate list of panel contact pairs
-    (:func:`panel_contact.near_pairs`).
+    ``scratch``: the run's :func:`kernels.scratch`.
     """
     n = P.n
     N = y.shape[0]
@@ -330,7 +329,7 @@ def step(P, y, f, h, A, B, K, near):
             fi = f
         else:
             _stage_state(y, K, st, yi)
-            fi = kernels.rhs(P, yi, near)
+            fi = kernels.rhs(P, yi, scratch)
         for i in range(N):
             r[i] = h * fi[i]
         if st > 0:
@@ -344,7 +343,7 @@ def step(P, y, f, h, A, B, K, near):
 
 
 @njit(cache=True, **FLOAT_MATH)
-def step_terms(P, y, f, h, jac, K, near):
+def step_terms(P, y, f, h, jac, K, scratch):
     """:func:`step` with the stiff Jacobian as the terms of :func:`terms`, in O(n r).
 
     Solves the reduced system times M, ``(M + hg C + hg^2 K) v = h M f_v - h
@@ -372,7 +371,7 @@ def step_terms(P, y, f, h, jac, K, near):
         fi = f
         if st > 0:  # u stays zero at stage 0
             _stage_state(y, K, st, yi)
-            fi = kernels.rhs(P, yi, near)
+            fi = kernels.rhs(P, yi, scratch)
             _stage_argument(K, st, u)
         z = K[st]
         articulated.times(P, S, I6, fi[n:2 * n], g, work6)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import integration, kernels, panel_contact, switches
+from . import integration, kernels, switches
 from .result import Status, no_onsets
 
 #: scipy's implicit solvers: they get the analytic Jacobian.
@@ -27,15 +27,15 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
     cls = getattr(scipy.integrate, name)
     n, N = P.n, len(y0)
     counts = {"nfev": 0, "njev": 0}
-    near = panel_contact.near_pairs(P)
+    scratch = kernels.scratch(P)
 
     def fun(t, y):
         counts["nfev"] += 1
-        return kernels.rhs(P, y, near)
+        return kernels.rhs(P, y, scratch)
 
     def jac(t, y):
         counts["njev"] += 1
-        return kernels.rhs_jacobian(P, y, kernels.rhs(P, y, near), near)
+        return kernels.rhs_jacobian(P, y, kernels.rhs(P, y, scratch), scratch)
 
     opts = dict(rtol=settings.rtol, atol=settings.atol, max_step=settings.max_step)
     if name in IMPLICIT:
@@ -93,10 +93,10 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
             while j < len(t_eval) and t_eval[j] <= solver.t:
                 out.append(sol(t_eval[j]))
                 j += 1
-            integration.record_onsets(P, solver.y, solver.t, t_eval, j, onsets, near)
-            if gap_limit > 0 and integration.max_gap(P, solver.y) > gap_limit:
+            integration.record_onsets(P, solver.y, solver.t, t_eval, j, onsets, scratch[0])
+            if gap_limit > 0 and integration.max_gap(P, solver.y, scratch) > gap_limit:
                 status = Status.GAP_EXCEEDED
-                message = (f"loop-closure gap {integration.max_gap(P, solver.y):.3g} m exceeded the limit "
+                message = (f"loop-closure gap {integration.max_gap(P, solver.y, scratch):.3g} m exceeded the limit "
                            f"{gap_limit:.3g} m at t = {solver.t:.6g} s")
                 break
             if nsteps >= max_steps:

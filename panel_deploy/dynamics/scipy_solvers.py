@@ -28,14 +28,15 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
     n, N = P.n, len(y0)
     counts = {"nfev": 0, "njev": 0}
     scratch = kernels.scratch(P)
+    near, buffers = scratch
 
     def fun(t, y):
         counts["nfev"] += 1
-        return kernels.rhs(P, y, scratch)
+        return kernels.rhs_apart(P, y, near, buffers)
 
     def jac(t, y):
         counts["njev"] += 1
-        return kernels.rhs_jacobian(P, y, kernels.rhs(P, y, scratch), scratch)
+        return kernels.rhs_jacobian(P, y, kernels.rhs_apart(P, y, near, buffers), scratch)
 
     opts = dict(rtol=settings.rtol, atol=settings.atol, max_step=settings.max_step)
     if name in IMPLICIT:
@@ -93,7 +94,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
             while j < len(t_eval) and t_eval[j] <= solver.t:
                 out.append(sol(t_eval[j]))
                 j += 1
-            integration.record_onsets(P, solver.y, solver.t, t_eval, j, onsets, scratch[0])
+            integration.record_onsets(P, solver.y, solver.t, t_eval, j, onsets, near)
             if gap_limit > 0 and integration.max_gap(P, solver.y, scratch) > gap_limit:
                 status = Status.GAP_EXCEEDED
                 message = (f"loop-closure gap {integration.max_gap(P, solver.y, scratch):.3g} m exceeded the limit "

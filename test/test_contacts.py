@@ -680,8 +680,8 @@ def test_the_candidate_list_changes_no_bit_of_what_it_serves(six_by_six):
 
 def test_the_gap_check_takes_the_poses_of_the_last_evaluation(six_by_six):
     """The compiled loops check the loop-closure gap with the poses their last
-    right-hand side left in the run's scratch (integration.max_gap,
-    evaluated): the gap from y's own kinematics, to the bit, on the O(n) path."""
+    right-hand side left in the run's scratch (integration.evaluated_gap): the
+    gap from y's own kinematics (integration.max_gap), to the bit, on the O(n) path."""
     _, model, result = six_by_six["true"]
     P = pack(model)
     assert articulated.applies(P.n) and len(P.cut_a) > 0
@@ -690,8 +690,8 @@ def test_the_gap_check_takes_the_poses_of_the_last_evaluation(six_by_six):
     for j in range(len(result.t)):
         y = kernels.state_vector(result.theta[j], result.omega[j])
         kernels.rhs(P, y, run)
-        gaps.append(integration.max_gap(P, y, run, True))
-        assert gaps[-1] == integration.max_gap(P, y, new_scratch(P))
+        gaps.append(integration.evaluated_gap(P, y, run))
+        assert gaps[-1] == integration.max_gap(P, y)
     assert max(gaps) > 0.0
 
 

@@ -92,6 +92,19 @@ def test_one_scratch_serves_every_evaluation_of_a_run(model):
     assert _buffer_rows(scratch(dense)[1]) == (1, 0, (0, 0))
 
 
+
+def test_the_entry_points_from_python_are_the_compiled_ones(model):
+    """scipy's solvers call rhs_apart and rhs_jacobian_apart, which take the
+    scratch's two parts apart: the same numbers as rhs and rhs_jacobian, to
+    the bit."""
+    P = pack(model)
+    near_part, buffers = scratch(P)
+    for y in states(model, 2):
+        f = kernels.rhs(P, y, scratch(P))
+        assert np.array_equal(kernels.rhs_apart(P, y, near_part, buffers), f)
+        assert np.array_equal(kernels.rhs_jacobian_apart(P, y, near_part, buffers),
+                              kernels.rhs_jacobian(P, y, f, scratch(P)))
+
 def test_factor_solve_and_product_are_the_dense_ones(model):
     P = pack(model)
     n = P.n

@@ -197,7 +197,7 @@ def compiled_loop(scheme):
                 # the step's last right-hand side was at its end: the explicit pair's K[6], f
                 integration.record_onsets(P, y, t, t_eval, j, onsets, near, True)
                 nsteps += 1
-                if gap_limit > 0.0 and integration.max_gap(P, y, scratch, True) > gap_limit:
+                if gap_limit > 0.0 and integration.evaluated_gap(P, y, scratch) > gap_limit:
                     status, code = -1, 3
                     break
                 if nsteps >= max_steps:

@@ -74,17 +74,23 @@ FAILURES = {1: "step size collapsed", 2: "non-finite state or derivative",
 
 
 @njit(cache=True, **FLOAT_MATH)
-def max_gap(P, y, scratch, evaluated=False):
-    """Largest loop-closure gap at state y, m, with the run's ``scratch``
-    (:func:`kernels.scratch`). ``evaluated``: its last right-hand side was at
-    y (the compiled loops evaluate it at an accepted step's end), so on the
-    O(n) path y's poses are there to take (its arrays), not to
-    compute again (2 % of 10 x 10's run)."""
-    if evaluated and articulated.applies(P.n):
-        return closure.largest_gap(P, scratch[1].R, scratch[1].p)
+def max_gap(P, y):
+    """Largest loop-closure gap at state y, m."""
     n = P.n
     R, p, _, _, _ = kernels.kinematics(P, y[:n], y[n:2 * n])
     return closure.largest_gap(P, R, p)
+
+
+@njit(cache=True, **FLOAT_MATH)
+def evaluated_gap(P, y, scratch):
+    """:func:`max_gap` at y where the run's last right-hand side was at y
+    (the compiled loops evaluate it at an accepted step's end): on the O(n)
+    path y's poses are in the run's ``scratch`` (:func:`kernels.scratch`) to
+    take, not to compute again (2 % of 10 x 10's run). Compiled callers only:
+    from Python numba would type the scratch's StructRef array by array."""
+    if articulated.applies(P.n):
+        return closure.largest_gap(P, scratch[1].R, scratch[1].p)
+    return max_gap(P, y)
 
 
 def leading_finite(rows, done, upto):

@@ -401,6 +401,14 @@ def rhs_jacobian(P, y, f0, scratch):
 
 
 @njit(cache=True, **FLOAT_MATH)
+def rhs_jacobian_apart(P, y, near, buffers):
+    """:func:`rhs_jacobian` at y with the :func:`scratch`'s two parts apart,
+    for calls from Python (see :func:`rhs_apart`)."""
+    scratch = (near, buffers)
+    return rhs_jacobian(P, y, rhs(P, y, scratch), scratch)
+
+
+@njit(cache=True, **FLOAT_MATH)
 def observe(P, y):
     """Energies and closure gap at one state.
 

@@ -27,8 +27,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
     cls = getattr(scipy.integrate, name)
     n, N = P.n, len(y0)
     counts = {"nfev": 0, "njev": 0}
-    scratch = kernels.scratch(P)
-    near, buffers = scratch
+    near, buffers = kernels.scratch(P)
 
     def fun(t, y):
         counts["nfev"] += 1
@@ -36,7 +35,7 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
 
     def jac(t, y):
         counts["njev"] += 1
-        return kernels.rhs_jacobian(P, y, kernels.rhs_apart(P, y, near, buffers), scratch)
+        return kernels.rhs_jacobian_apart(P, y, near, buffers)
 
     opts = dict(rtol=settings.rtol, atol=settings.atol, max_step=settings.max_step)
     if name in IMPLICIT:
@@ -95,9 +94,9 @@ def integrate_scipy(name, P, y0, t_eval, settings, max_steps, gap_limit, stops):
                 out.append(sol(t_eval[j]))
                 j += 1
             integration.record_onsets(P, solver.y, solver.t, t_eval, j, onsets, near)
-            if gap_limit > 0 and integration.max_gap(P, solver.y, scratch) > gap_limit:
+            if gap_limit > 0 and integration.max_gap(P, solver.y) > gap_limit:
                 status = Status.GAP_EXCEEDED
-                message = (f"loop-closure gap {integration.max_gap(P, solver.y, scratch):.3g} m exceeded the limit "
+                message = (f"loop-closure gap {integration.max_gap(P, solver.y):.3g} m exceeded the limit "
                            f"{gap_limit:.3g} m at t = {solver.t:.6g} s")
                 break
             if nsteps >= max_steps:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from panel_deploy.dynamics import compiled, erk, hinges, kernels, rosenbrock, simulate, stiff
-from panel_deploy.dynamics.compiled import choose_scheme, stiffness
+from panel_deploy.dynamics.compiled import SQUARINGS, choose_scheme, radius_bound, stiffness
 from panel_deploy.dynamics.kernels import state_vector
 from panel_deploy.dynamics.pack import pack
 from panel_deploy.errors import ModelError
@@ -114,6 +114,37 @@ def test_auto_keeps_the_explicit_pair_for_a_mild_model():
     r = simulate(model, SimulationSection(t_end=0.05, method="compiled", samples=6),
                  State(0.0, y0[:1], y0[1:2]))
     assert r.success and r.scheme == "tsit5"
+
+
+def test_radius_bound_is_never_below_the_spectral_radius():
+    """radius_bound is an upper bound on |eigenvalues| of any matrix, near it
+    for a well-conditioned one, finite and not 0 for entries that a plain
+    power would overflow or underflow, 0 for the zero matrix."""
+    rng = np.random.default_rng(4)
+    for scale in (1e-200, 1e-3, 1.0, 1e5, 1e200):
+        for J in (rng.normal(size=(30, 30)), np.triu(rng.normal(size=(30, 30)), -1),
+                  np.diag(rng.uniform(-1, 1, 30)) + np.diag(rng.normal(size=29) * 1e3, 1)):
+            rho = np.abs(np.linalg.eigvals(scale * J)).max()
+            bound = radius_bound(scale * J)
+            assert np.isfinite(bound) and bound >= rho * (1 - 1e-12), (scale, bound, rho)
+    S = rng.normal(size=(40, 40))
+    S = S + S.T  # normal: |S^m|_F <= sqrt(N) rho^m
+    rho = np.abs(np.linalg.eigvalsh(S)).max()
+    assert rho <= radius_bound(S) <= rho * 40 ** (0.5 / 2 ** SQUARINGS) * (1 + 1e-12)
+    shift = np.diag(np.ones(9), 1)  # nilpotent: a bound of a power before the zero one
+    assert 0.0 < radius_bound(shift) <= np.linalg.norm(np.linalg.matrix_power(shift, 8)) ** (1 / 8)
+    assert radius_bound(np.zeros((3, 3))) == 0.0
+
+
+@pytest.mark.parametrize("root", [1e2, 1e4, 1e5, 1e7])
+def test_choose_scheme_decides_as_the_eigenvalues_do(root):
+    """The bound only spares the eigenvalues where it rules stiffness out:
+    the scheme is the one the spectral radius picks."""
+    model, lam, _ = overdamped_plate(root)
+    P = pack(model)
+    y0 = state_vector([1.0], [0.0])
+    stiff_at_start = stiffness(P, y0) * compiled.STIFF_STEP > 3.3
+    assert choose_scheme(P, y0) == ("ros34pw2" if stiff_at_start else compiled.EXPLICIT_PAIR)
 
 
 @pytest.mark.parametrize("closure", ["penalty", "exact"])

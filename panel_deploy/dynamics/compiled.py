@@ -259,19 +259,59 @@ STIFF_STEP = 2e-4
 EXPLICIT_PAIR = "tsit5"
 
 
-def stiffness(P, y) -> float:
-    """Spectral radius (1/s) of the stiff part of the Jacobian at state y."""
+def _stiff_part(P, y):
+    """[[0, I], [A, B]] (2n, 2n, 1/s) of the stiff part of the Jacobian at y
+    (:func:`.stiff.stiff_jacobian`), or None where it is not finite."""
     n = P.n
     A, B, ok = stiff.stiff_jacobian(P, y, panel_contact.near_pairs(P))
     if not (ok and np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
-        return math.inf
-    J = np.block([[np.zeros((n, n)), np.eye(n)], [A, B]])
-    return float(np.abs(np.linalg.eigvals(J)).max())
+        return None
+    return np.block([[np.zeros((n, n)), np.eye(n)], [A, B]])
+
+
+def stiffness(P, y) -> float:
+    """Spectral radius (1/s) of the stiff part of the Jacobian at state y."""
+    J = _stiff_part(P, y)
+    return math.inf if J is None else float(np.abs(np.linalg.eigvals(J)).max())
+
+
+#: Squarings of :func:`radius_bound`: for a diagonalisable J = X L X^-1 of
+#: size N the bound exceeds the radius by at most the factor
+#: ``(sqrt(N) cond(X))^(1 / 2^k)``, 1.34 for N = 170 and cond(X) = 1e3 at k = 5.
+SQUARINGS = 5
+
+
+def radius_bound(J) -> float:
+    """An upper bound (1/s) on the spectral radius of the square matrix J:
+    ``|J^m|_F^(1/m)`` for m = 2^SQUARINGS, which no eigenvalue exceeds (the
+    Frobenius norm is submultiplicative) and which falls to the radius as m
+    grows (Gelfand's formula). Each power is rescaled to norm 1 and the
+    scales kept as logarithms, so none overflows or underflows; a power
+    that is exactly zero leaves the bound of the one before. Five products
+    of (2n, 2n) matrices: 1.3 ms on 10 x 10 against 7 ms for the
+    eigenvalues."""
+    X = np.array(J, dtype=float)
+    log_bound = 0.0
+    weight = 1.0
+    for k in range(SQUARINGS + 1):
+        if k:
+            X = X @ X
+        largest = float(np.abs(X).max())
+        if largest == 0.0:
+            return 0.0 if k == 0 else math.exp(log_bound)
+        X /= largest
+        norm = float(np.linalg.norm(X))  # >= 1: no underflow
+        X /= norm
+        log_bound += weight * (math.log(largest) + math.log(norm))
+        weight *= 0.5
+    return math.exp(log_bound)
 
 
 def choose_scheme(P, y0) -> str:
     """The compiled scheme for ``method="compiled"``: "ros34pw2" if the model is
     stiff at y0 (``3.3 / stiffness > STIFF_STEP``), else :data:`EXPLICIT_PAIR`.
+    The eigenvalues are computed only where :func:`radius_bound` cannot rule
+    stiffness out (10 x 10: 7 ms of a 0.4 s run).
 
     Measured crossover (with DOPRI5, whose stability region Tsitouras' pair
     matches within 6 %): on the paper scene (penalty closure, rho ~ 7e4 1/s at
@@ -281,7 +321,12 @@ def choose_scheme(P, y0) -> str:
     increasingly so at tight tolerances. Contacts that start later (k_s, c_s)
     are not foreseen: a tree that starts out of contact gets the explicit pair.
     """
-    return "ros34pw2" if stiffness(P, y0) * STIFF_STEP > 3.3 else EXPLICIT_PAIR  # a model without stiffness: 0
+    J = _stiff_part(P, y0)
+    limit = 3.3 / STIFF_STEP
+    if J is not None and radius_bound(J) <= limit:
+        return EXPLICIT_PAIR
+    rho = math.inf if J is None else float(np.abs(np.linalg.eigvals(J)).max())
+    return "ros34pw2" if rho > limit else EXPLICIT_PAIR
 
 
 def _loop_of(scheme, P):

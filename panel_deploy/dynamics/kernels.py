@@ -44,8 +44,8 @@ from ._jit import FLOAT_MATH
 from .air import air_drag
 from .buffers import allocate
 from .closure import (articulated_closure, cholesky, cholesky_solve, closure_jacobian,
-                      closure_jacobian_into, constraint_factor, cut_angle, cut_ends, cut_forces,
-                      exact_closure, largest_gap)
+                      closure_jacobian_into, constraint_factor, cut_angle, cut_angles, cut_ends,
+                      cut_forces, exact_closure, largest_gap)
 from .hinges import hinge_law
 from .pack import EXACT, TREE
 from .panel_contact import near_pairs, panel_contacts, take_onsets
@@ -409,20 +409,36 @@ def rhs_jacobian_apart(P, y, near, buffers):
 
 
 @njit(cache=True, **FLOAT_MATH)
-def observe(P, y):
-    """Energies and closure gap at one state.
+def observe(P, y, scratch):
+    """Energies and closure gap at one state, with the run's ``scratch``
+    (:func:`scratch`).
 
     Returns kinetic, spring (the panel contacts' included), the panel
     contacts' and gravity energy (J), largest gap (m) and the closure
-    Jacobian (5 m, n) for its singular values.
+    Jacobian (5 m, n) for its singular values. On the O(n) path
+    (:func:`articulated.applies`) the kinetic energy is summed over the
+    bodies, with no mass matrix (O(n^2) to build).
     """
     n = P.n
     theta = y[:n]
     omega = y[n:2 * n]
-    M, Q, kin, acc, spring, contact, _, _, gravity_energy = mass_and_bias(
-        P, theta, omega, near_pairs(P))
-    kinetic = 0.5 * sp.dot(omega, sp.mv(M, omega))
-    R, p, w, vo, S = kin
+    near, b = scratch
+    if articulated.applies(n):
+        R, p, w, vo, S, Jb, hb = b.R, b.p, b.w, b.vo, b.S, b.Jb, b.hb
+        kinematics_into(P, theta, omega, R, p, w, vo, S)
+        body_inertias_into(P, R, p, Jb, hb)
+        kin = (R, p, w, vo, S)
+        _, _, spring, contact, _, _, gravity_energy = _bias(P, theta, omega, kin, Jb, hb, near,
+                                                            b.f, b.acc, b.Q)
+        kinetic = 0.0
+        for i in range(n):
+            wi, voi = sp.get(w, i), sp.get(vo, i)
+            hw, hv = sp.inertia_times(Jb, i, sp.get(hb, i), P.mass[i], wi, voi)
+            kinetic += 0.5 * (sp.dot(wi, hw) + sp.dot(voi, hv))
+    else:
+        M, _, kin, _, spring, contact, _, _, gravity_energy = mass_and_bias(P, theta, omega, near)
+        kinetic = 0.5 * sp.dot(omega, sp.mv(M, omega))
+        R, p, w, vo, S = kin
     gap = 0.0
     if P.method != TREE:
         gap = largest_gap(P, R, p)
@@ -430,3 +446,31 @@ def observe(P, y):
     else:
         J = np.zeros((0, n))
     return kinetic, spring, contact, gravity_energy, gap, J
+
+
+@njit(cache=True, **FLOAT_MATH)
+def observe_samples(P, Y):
+    """What a result holds of each sample, the rows y of Y (s, N), in one pass:
+    :func:`body_states` (rotations (s, nb, 3, 3), centroids, centroid and
+    angular velocities (s, nb, 3), model body order), :func:`observe`'s
+    energies (s, 4: kinetic, spring, contact, gravity; J), largest gaps
+    (s,) m and closure Jacobians (s, 5 m, n), and the cut hinges' angles
+    (s, m) rad. One call from Python, not four a sample (10 x 10's 41
+    samples took 5 ms of a 0.41 s run so)."""
+    n, s, nb, m = P.n, Y.shape[0], P.n + 1, P.cut_a.shape[0]
+    R = np.empty((s, nb, 3, 3))
+    p = np.empty((s, nb, 3))
+    v = np.empty((s, nb, 3))
+    w = np.empty((s, nb, 3))
+    energy = np.empty((s, 4))
+    gaps = np.empty(s)
+    Js = np.empty((s, 5 * m if P.method != TREE else 0, n))
+    cut = np.empty((s, m))
+    run = scratch(P)
+    for j in range(s):
+        y = Y[j]
+        R[j], p[j], v[j], w[j] = body_states(P, y[:n], y[n:2 * n])
+        energy[j, 0], energy[j, 1], energy[j, 2], energy[j, 3], gaps[j], Js[j] = observe(P, y, run)
+        if m:
+            cut[j] = cut_angles(P, R[j][P.body])  # kernel body order
+    return R, p, v, w, energy, gaps, Js, cut

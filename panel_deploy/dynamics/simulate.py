@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import ModelError
 from ..model import Model, State
-from . import closure, kernels
+from . import kernels
 from .integrate import integrate_blocks
 from .pack import pack
 from .report import contact_energy_created, total_energy
@@ -204,28 +204,15 @@ def body_states(P, theta, omega):
 
 
 def _result(P, t, run, method, wall, gap_limit) -> SimulationResult:
-    n, s, nb = P.n, len(t), P.n + 1
+    n = P.n
     Y = run.y
-    R = np.empty((s, nb, 3, 3))
-    p = np.empty((s, nb, 3))
-    v = np.empty((s, nb, 3))
-    w = np.empty((s, nb, 3))
-    m = len(P.cut_a)
-    k_sigma = min(5 * m, n)
-    sigma = np.empty((s, k_sigma))
-    cut_theta = np.empty((s, m))
-    gaps = np.zeros(s)
-    names = ("kinetic", "spring", "contact", "gravity", "dissipated", "constraint_work", "contact_work")
-    energy = {k: np.empty(s) for k in names}
-    for j, y in enumerate(Y):
-        R[j], p[j], v[j], w[j] = body_states(P, y[:n], y[n:2 * n])
-        kin, spring, contact, grav, gaps[j], J = kernels.observe(P, y)
-        energy["kinetic"][j], energy["spring"][j], energy["contact"][j], energy["gravity"][j] = (
-            kin, spring, contact, grav)
-        energy["dissipated"][j], energy["constraint_work"][j], energy["contact_work"][j] = y[2 * n:]
-        if m:
-            sigma[j] = np.linalg.svd(J, compute_uv=False)[::-1][:k_sigma]
-            cut_theta[j] = closure.cut_angles(P, R[j, P.body])  # kernel body order
+    R, p, v, w, observed, gaps, Js, cut_theta = kernels.observe_samples(P, np.ascontiguousarray(Y))
+    k_sigma = min(5 * len(P.cut_a), n)
+    # one LAPACK call over the stack of Jacobians, not one a sample
+    sigma = (np.linalg.svd(Js, compute_uv=False)[:, ::-1][:, :k_sigma] if k_sigma
+             else np.empty((len(Y), 0)))
+    energy = dict(zip(("kinetic", "spring", "contact", "gravity"), observed.T.copy()))
+    energy |= dict(zip(("dissipated", "constraint_work", "contact_work"), Y[:, 2 * n:].T.copy()))
     return SimulationResult(
         t=t, theta=Y[:, :n].copy(), omega=Y[:, n:2 * n].copy(),
         rotation=R, position=p, linear_velocity=v, angular_velocity=w,

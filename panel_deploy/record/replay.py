@@ -56,15 +56,16 @@ def poses(model, thetas):
 def energies(d: RecordedDeployment) -> dict:
     """Kinetic, spring and gravity energy and their sum (J) at every sample;
     only spring and gravity when the recording has no rates."""
-    from ..dynamics.kernels import observe, state_vector
+    from ..dynamics.kernels import observe, scratch, state_vector
     from ..dynamics.pack import pack
 
     P, n = pack(d.model), d.model.n_coords
+    run = scratch(P)
     has_rates = not isinstance(d.track.omega, list)
     out = {"spring": [], "gravity": []} | ({"kinetic": [], "total": []} if has_rates else {})
     for j, theta in enumerate(d.track.theta):
         y = state_vector(theta, d.track.omega[j] if has_rates else np.zeros(n))
-        kinetic, spring, _, gravity, _, _ = observe(P, y)
+        kinetic, spring, _, gravity, _, _ = observe(P, y, run)
         out["spring"].append(spring)
         out["gravity"].append(gravity)
         if has_rates:

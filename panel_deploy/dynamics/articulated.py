@@ -169,13 +169,14 @@ def up_rows(P, S, U, D, T, out, work):
     # out holds u_i, work the articulated bias forces passed to the parent
     for i in range(n - 1, -1, -1):
         a = P.parent[i]
+        inv = 1.0 / D[i]  # one division a body, not a row (10 x 10's closure: 6 rows)
         for r in range(m):
             u = T[r, i]
             for k in range(6):
                 u -= S[i, k] * work[r, i, k]
             out[r, i] = u
             if a < n:
-                c = u / D[i]
+                c = u * inv
                 for k in range(6):
                     work[r, a, k] += work[r, i, k] + U[i, k] * c
 

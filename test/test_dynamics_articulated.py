@@ -105,6 +105,26 @@ def test_the_entry_points_from_python_are_the_compiled_ones(model):
         assert np.array_equal(kernels.rhs_jacobian_apart(P, y, near_part, buffers),
                               kernels.rhs_jacobian(P, y, f, scratch(P)))
 
+
+def test_observe_takes_the_dense_energies_without_the_mass_matrix(model):
+    """On the O(n) path observe sums the kinetic energy over the bodies: it is
+    omega . M omega / 2 with the mass matrix of the dense path, and the other
+    energies, the gap and the closure Jacobian are the dense path's."""
+    P = pack(model)
+    n = P.n
+    assert articulated.applies(n)
+    run = scratch(P)
+    for y in states(model, 3):
+        M, _, (R, p, w, vo, S), _, spring, contact, _, _, gravity = kernels.mass_and_bias(
+            P, y[:n], y[n:2 * n], near(P))
+        kinetic = 0.5 * y[n:2 * n] @ M @ y[n:2 * n]
+        got = kernels.observe(P, y, run)
+        assert got[0] == pytest.approx(kinetic, rel=1e-12)
+        assert got[1:4] == pytest.approx((spring, contact, gravity), rel=1e-12, abs=1e-15)
+        if P.method != TREE:
+            assert got[4] == closure.largest_gap(P, R, p)
+            assert np.array_equal(got[5], kernels.closure_jacobian(P, R, p, w, vo, S, np.zeros((0, 6)))[1])
+
 def test_factor_solve_and_product_are_the_dense_ones(model):
     P = pack(model)
     n = P.n

@@ -269,10 +269,14 @@ def _stiff_part(P, y):
     return np.block([[np.zeros((n, n)), np.eye(n)], [A, B]])
 
 
+def _radius(J) -> float:
+    """Spectral radius of :func:`_stiff_part`'s J (inf for None)."""
+    return math.inf if J is None else float(np.abs(np.linalg.eigvals(J)).max())
+
+
 def stiffness(P, y) -> float:
     """Spectral radius (1/s) of the stiff part of the Jacobian at state y."""
-    J = _stiff_part(P, y)
-    return math.inf if J is None else float(np.abs(np.linalg.eigvals(J)).max())
+    return _radius(_stiff_part(P, y))
 
 
 #: Squarings of :func:`radius_bound`: for a diagonalisable J = X L X^-1 of
@@ -325,8 +329,7 @@ def choose_scheme(P, y0) -> str:
     limit = 3.3 / STIFF_STEP
     if J is not None and radius_bound(J) <= limit:
         return EXPLICIT_PAIR
-    rho = math.inf if J is None else float(np.abs(np.linalg.eigvals(J)).max())
-    return "ros34pw2" if rho > limit else EXPLICIT_PAIR
+    return "ros34pw2" if _radius(J) > limit else EXPLICIT_PAIR
 
 
 def _loop_of(scheme, P):

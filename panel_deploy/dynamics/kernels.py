@@ -411,7 +411,8 @@ def rhs_jacobian_apart(P, y, near, buffers):
 @njit(cache=True, **FLOAT_MATH)
 def observe(P, y, scratch):
     """Energies and closure gap at one state, with the run's ``scratch``
-    (:func:`scratch`).
+    (:func:`scratch`); from Python, :func:`observe_samples` (numba types the
+    scratch anew at each call from Python, ~0.2 ms).
 
     Returns kinetic, spring (the panel contacts' included), the panel
     contacts' and gravity energy (J), largest gap (m) and the closure

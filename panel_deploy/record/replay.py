@@ -56,22 +56,20 @@ def poses(model, thetas):
 def energies(d: RecordedDeployment) -> dict:
     """Kinetic, spring and gravity energy and their sum (J) at every sample;
     only spring and gravity when the recording has no rates."""
-    from ..dynamics.kernels import observe, scratch, state_vector
+    from ..dynamics.kernels import ACCUMULATORS, observe_samples, state_vector
     from ..dynamics.pack import pack
 
     P, n = pack(d.model), d.model.n_coords
-    run = scratch(P)
     has_rates = not isinstance(d.track.omega, list)
-    out = {"spring": [], "gravity": []} | ({"kinetic": [], "total": []} if has_rates else {})
+    Y = np.empty((len(d.track.theta), 2 * n + ACCUMULATORS))
     for j, theta in enumerate(d.track.theta):
-        y = state_vector(theta, d.track.omega[j] if has_rates else np.zeros(n))
-        kinetic, spring, _, gravity, _, _ = observe(P, y, run)
-        out["spring"].append(spring)
-        out["gravity"].append(gravity)
-        if has_rates:
-            out["kinetic"].append(kinetic)
-            out["total"].append(kinetic + spring + gravity)
-    return {k: np.array(v) for k, v in out.items()}
+        Y[j] = state_vector(theta, d.track.omega[j] if has_rates else np.zeros(n))
+    # one compiled pass over the samples: observe from Python types the
+    # scratch it takes anew at each call (~0.2 ms a sample)
+    energy = observe_samples(P, Y)[4]
+    kinetic, spring, _, gravity = energy.T.copy()
+    out = {"spring": spring, "gravity": gravity}
+    return out | ({"kinetic": kinetic, "total": kinetic + spring + gravity} if has_rates else {})
 
 
 def collision_events(d: RecordedDeployment):
